@@ -1,0 +1,1 @@
+"""Skin Detach: deform huge detail meshes through a small proxy, detail kept intact."""

@@ -1,0 +1,82 @@
+"""Small geometric and topological building blocks shared by the core modules.
+
+Conventions: ``points`` is (n, 3) float64, indexed by vertex id; ``triangles`` is (f, 3) int,
+indexed by face id, each row the three vertex ids of one face in counter-clockwise order.
+"""
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+
+def cross_rows(a, b):
+    """(r, 3) row-wise cross products of (r, 3) arrays (np.cross is slow on many rows)."""
+    out = np.empty(a.shape)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def face_cross(points, triangles):
+    """(f, 3) cross products (P1 - P0) x (P2 - P0): the face normal scaled by twice its area."""
+    p0 = points[triangles[:, 0]]
+    return cross_rows(points[triangles[:, 1]] - p0, points[triangles[:, 2]] - p0)
+
+
+def unit_rows(vectors, eps=0.0):
+    """(r, 3) rows scaled to unit length; rows of length <= eps stay zero. Also returns the lengths."""
+    lengths = np.sqrt(np.einsum("ij,ij->i", vectors, vectors))
+    safe = np.where(lengths > eps, lengths, 1.0)
+    unit = vectors / safe[:, None]
+    unit[lengths <= eps] = 0.0
+    return unit, lengths
+
+
+def vertex_normals(points, triangles, cross=None):
+    """(n, 3) unit area-weighted vertex normals; zero for vertices without a face of non-zero area.
+
+    ``cross`` (f, 3), if given, is :func:`face_cross` of the same mesh.
+    """
+    if cross is None:
+        cross = face_cross(points, triangles)
+    n = points.shape[0]
+    acc = np.zeros((n, 3))
+    for corner in range(3):
+        ids = triangles[:, corner]
+        for axis in range(3):
+            acc[:, axis] += np.bincount(ids, weights=cross[:, axis], minlength=n)
+    return unit_rows(acc)[0]
+
+
+def bbox_diagonal(points):
+    """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3)."""
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def vertex_faces(triangles, n_points):
+    """CSR incidence: faces around each vertex. Returns (indptr (n+1,), face ids (3f,))."""
+    ids = triangles.ravel()
+    order = np.argsort(ids, kind="stable")
+    counts = np.bincount(ids, minlength=n_points)
+    indptr = np.zeros(n_points + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    return indptr, (order // 3).astype(np.int64)
+
+
+def component_labels(triangles, n_points):
+    """(n,) connected-component label of every vertex (edge connectivity); loose vertices get their own."""
+    # Two edges per face connect its three corners; weak connectivity ignores their direction.
+    rows = np.concatenate([triangles[:, 0], triangles[:, 1]])
+    cols = np.concatenate([triangles[:, 1], triangles[:, 2]])
+    graph = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n_points, n_points))
+    return connected_components(graph, directed=True, connection="weak")[1]
+
+
+def segment_ranges(indptr, rows):
+    """Flattened CSR positions for ``rows``: (positions, owner) where owner[k] indexes ``rows``."""
+    starts = indptr[rows]
+    counts = indptr[rows + 1] - starts
+    owner = np.repeat(np.arange(rows.size), counts)
+    offsets = np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    return starts[owner] + offsets, owner

@@ -1,0 +1,104 @@
+"""A detail mesh made ready for simplification and binding.
+
+Raw meshes come with duplicate vertices (split UV seams), repeated or zero-area faces and
+vertices no face uses. :func:`prepare_mesh` welds exact duplicates, keeps only faces that can
+be simplified, and labels connected components, without touching the caller's arrays.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import bbox_diagonal, component_labels, face_cross, vertex_normals
+
+#: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal.
+DEGENERATE_AREA = 1e-14
+
+
+@dataclass
+class PreparedMesh:
+    """Welded, cleaned detail mesh.
+
+    points      (u, 3) float64   unique vertex positions, indexed by welded id
+    weld        (n,) int64       welded id of every input vertex
+    triangles   (t, 3) int64     faces kept for simplification, in welded ids
+    cross       (t, 3) float64   face cross products of ``triangles`` (twice the area along the normal)
+    normals     (u, 3) float64   unit vertex normals (zero where no face of non-zero area)
+    components  (u,) int64       connected-component label of every welded vertex
+    diagonal    float            bounding-box diagonal of the input
+    """
+
+    points: np.ndarray
+    weld: np.ndarray
+    triangles: np.ndarray
+    cross: np.ndarray
+    normals: np.ndarray
+    components: np.ndarray
+    diagonal: float
+    welded_vertices: int
+    dropped_faces: int
+
+
+def weld_map(points):
+    """(n,) welded id of every row of ``points`` (n, 3) and the (u,) first input row of each id.
+
+    Rows are equal when their coordinates are bit-identical (after folding -0.0 into 0.0).
+    Rows are grouped by a 64-bit hash and compared in full, so a hash collision can only
+    leave two duplicates apart, never weld different points.
+    """
+    keys = np.ascontiguousarray(points + 0.0).view(np.uint64)
+    hashed = (keys[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (keys[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))
+    hashed ^= keys[:, 2] * np.uint64(0x165667B19E3779F9)
+    order = np.argsort(hashed, kind="stable")
+    sorted_keys = keys[order]
+    new_group = np.ones(order.size, dtype=bool)
+    new_group[1:] = (sorted_keys[1:] != sorted_keys[:-1]).any(axis=1)
+    group = np.empty(order.size, dtype=np.int64)
+    group[order] = np.cumsum(new_group) - 1
+    first = np.minimum.reduceat(order, np.flatnonzero(new_group)).astype(np.int64)
+    # Number groups by their first occurrence so that a mesh without duplicates keeps its ids.
+    first_order = np.argsort(first, kind="stable")
+    rank = np.empty_like(first)
+    rank[first_order] = np.arange(first.size)
+    return rank[group], first[first_order]
+
+
+def prepare_mesh(points, triangles):
+    """Weld and clean a validated mesh: ``points`` (n, 3) float64, ``triangles`` (f, 3) int64."""
+    diagonal = bbox_diagonal(points)
+    weld, representatives = weld_map(points)
+    if representatives.size == points.shape[0]:
+        unique_points = points
+    else:
+        unique_points = points[representatives]
+    faces = weld[triangles]
+
+    distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
+    cross = face_cross(unique_points, faces)
+    area2 = np.einsum("ij,ij->i", cross, cross)
+    keep = distinct & (area2 > (DEGENERATE_AREA * max(diagonal, 1e-300) ** 2) ** 2)
+    kept = faces[keep]
+    # Drop repeated faces (same three vertices in any order): they make non-manifold fans of two.
+    if kept.shape[0]:
+        s = np.sort(kept, axis=1)
+        u = unique_points.shape[0]
+        key = (s[:, 0] * u + s[:, 1]) * u + s[:, 2] if u < 2_000_000 else None
+        if key is not None:
+            _, first = np.unique(key, return_index=True)
+        else:
+            _, first = np.unique(s, axis=0, return_index=True)
+        first = np.flatnonzero(keep)[np.sort(first)]
+    else:
+        first = np.flatnonzero(keep)
+    kept, kept_cross = faces[first], cross[first]
+    return PreparedMesh(
+        points=unique_points,
+        weld=weld,
+        triangles=np.ascontiguousarray(kept),
+        cross=kept_cross,
+        normals=vertex_normals(unique_points, kept, kept_cross),
+        components=component_labels(kept, unique_points.shape[0]),
+        diagonal=diagonal,
+        welded_vertices=int(points.shape[0] - unique_points.shape[0]),
+        dropped_faces=int(triangles.shape[0] - kept.shape[0]),
+    )

@@ -1,0 +1,62 @@
+"""The rebuild of the detail mesh from a deformed proxy (paper eq. 10/11) as one sparse product.
+
+With rest-area weights every detail vertex is a fixed linear combination of proxy vertices
+and per-face scaled normals: X = W [P'; N'] with W (n, m + k) sparse, P' (m, 3) the deformed
+proxy and N' (k, 3) its face normals scaled by sqrt(|cross|) (see :mod:`.skin`).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+
+from .geometry import face_cross
+
+
+def scaled_normals(points, triangles):
+    """(k, 3) face cross products divided by the square root of their length (zero if degenerate)."""
+    cross = face_cross(points, triangles)
+    length = np.sqrt(np.sqrt(np.einsum("ij,ij->i", cross, cross)))
+    return cross / np.where(length > 0.0, length, 1.0)[:, None]
+
+
+def rebuild_matrix(skin, proxy_triangles, n_proxy, weld):
+    """(n, m + k) CSR matrix W of the rebuild; row i is detail vertex i (``weld`` (n,) maps it
+    to its welded row of ``skin``)."""
+    k = proxy_triangles.shape[0]
+    u = skin.case.shape[0]
+    corners = proxy_triangles[skin.face]
+    rows = np.concatenate([np.repeat(skin.vertex, 3), skin.vertex])
+    cols = np.concatenate([corners.ravel(), n_proxy + skin.face])
+    data = np.concatenate([(skin.bary * skin.weight[:, None]).ravel(), skin.height * skin.weight])
+    welded = sp.csr_matrix((data, (rows, cols)), shape=(u, n_proxy + k))
+    welded.sum_duplicates()
+    matrix = welded if weld.size == u and np.array_equal(weld, np.arange(u)) else welded[weld]
+    matrix = sp.csr_matrix(matrix)
+    matrix.sort_indices()
+    matrix.indptr = matrix.indptr.astype(np.int32)
+    matrix.indices = matrix.indices.astype(np.int32)
+    return matrix
+
+
+class Rebuild:
+    """Holds W and rebuilds detail vertices from deformed proxy vertices.
+
+    ``__call__(points (m, 3))`` returns (n, 3) float64; ``out`` may be a preallocated array.
+    One single-vector product per coordinate runs about a third faster than one three-column
+    product in scipy.
+    """
+
+    def __init__(self, matrix, proxy_triangles):
+        self.matrix = matrix
+        self.triangles = proxy_triangles
+        self.n_proxy = matrix.shape[1] - proxy_triangles.shape[0]
+        self._stacked = np.empty((3, matrix.shape[1]))
+
+    def __call__(self, points, out=None):
+        stacked = self._stacked
+        stacked[:, :self.n_proxy] = points.T
+        stacked[:, self.n_proxy:] = scaled_normals(points, self.triangles).T
+        if out is None:
+            out = np.empty((self.matrix.shape[0], 3))
+        for axis in range(3):
+            out[:, axis] = self.matrix @ stacked[axis]
+        return out

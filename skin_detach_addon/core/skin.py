@@ -1,0 +1,239 @@
+"""Skin coefficients: every detail vertex expressed over proxy triangles (paper section 3.2).
+
+An association binds detail vertex V to proxy triangle (P1, P2, P3) by barycentrics
+(b1, b2, b3) of the drop point of V along the triangle's normal and the signed distance d,
+so that V = b1 P1 + b2 P2 + b3 P3 + d n. The distance is stored as the height
+h = d / sqrt(|(P2 - P1) x (P3 - P1)|), so the rebuild can use the unnormalised normal
+N = c / sqrt(|c|), c the cross product, which makes the rebuild commute with uniform scale.
+
+Candidates (the mis-attachment fix: a vertex only binds near where it collapsed to):
+  tier 1  the proxy faces around the vertex's carrier (the proxy vertex it collapsed into);
+  tier 2  only if no tier-1 face contains it: the faces around the carrier's neighbours.
+A face *contains* V when the drop point lies in it (all barycentrics >= -CONTAIN_EPS) and its
+normal agrees with V's normal (positive dot; vertices without a normal accept any face).
+  case 1  exactly one containing face;
+  case 3  several: keep those with |d| <= 2 |d_min| (+ DISTANCE_EPS of the diagonal);
+  case 2  none: the proxy vertex nearest to V among the carrier and its neighbours, and every
+          face around it whose normal agrees (all of them if none agrees), extended planes.
+Loose vertices (no face of the detail uses them) take the globally nearest proxy vertex, as in
+case 2, with no normal filter.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .geometry import bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
+
+#: Barycentric tolerance for "the drop point lies in the triangle".
+CONTAIN_EPS = 1e-9
+#: Distance tolerance of the case-3 rule, relative to the proxy's bounding-box diagonal.
+DISTANCE_EPS = 1e-9
+#: Vertices handled per vectorised batch (bounds the memory of the build).
+CHUNK = 131072
+
+CASE_ONE, CASE_TWO, CASE_THREE, CASE_LOOSE = 1, 2, 3, 4
+
+
+@dataclass
+class Skin:
+    """Associations, one row each, grouped by vertex in ascending order.
+
+    vertex  (a,) int64    welded detail vertex id
+    face    (a,) int64    proxy face id
+    bary    (a, 3) float  barycentrics over the face's three corners (may be negative in case 2)
+    height  (a,) float    signed distance over sqrt(|cross|) of the rest face
+    weight  (a,) float    rest-area weight, summing to one per vertex
+    case    (u,) int8     CASE_* of every welded detail vertex
+    """
+
+    vertex: np.ndarray
+    face: np.ndarray
+    bary: np.ndarray
+    height: np.ndarray
+    weight: np.ndarray
+    case: np.ndarray
+
+
+class ProxyFrames:
+    """Rest frames of the proxy faces and the candidate tables built from them.
+
+    points (m, 3), triangles (k, 3). ``ring`` is the vertex -> faces CSR, ``tier2`` the
+    vertex -> faces-around-neighbours CSR (without the ring), ``closed`` the vertex -> itself
+    and its neighbours CSR.
+    """
+
+    def __init__(self, points, triangles):
+        self.points = points
+        self.triangles = triangles
+        self.tolerance = DISTANCE_EPS * bbox_diagonal(points)
+        m, k = points.shape[0], triangles.shape[0]
+        self.p0 = points[triangles[:, 0]]
+        self.e1 = points[triangles[:, 1]] - self.p0
+        self.e2 = points[triangles[:, 2]] - self.p0
+        cross = face_cross(points, triangles)
+        self.normal, self.cross_len = unit_rows(cross)
+        self.uu = np.einsum("ij,ij->i", self.e1, self.e1)
+        self.uv = np.einsum("ij,ij->i", self.e1, self.e2)
+        self.vv = np.einsum("ij,ij->i", self.e2, self.e2)
+        self.denom = self.uv * self.uv - self.uu * self.vv
+        scale = np.maximum(self.uu, self.vv)
+        self.valid = self.cross_len > 1e-12 * np.maximum(scale, 1e-300)
+
+        self.ring = vertex_faces(triangles, m)
+        incidence = sp.csr_matrix((np.ones(3 * k), (triangles.ravel(), np.repeat(np.arange(k), 3))), shape=(m, k))
+        adjacency = ((incidence @ incidence.T) > 0).astype(np.int8).tocsr()
+        adjacency.setdiag(1)
+        adjacency.eliminate_zeros()
+        adjacency.sort_indices()
+        self.closed = (adjacency.indptr.astype(np.int64), adjacency.indices.astype(np.int64))
+        around = ((adjacency @ incidence) > 0).astype(np.int8) - (incidence > 0).astype(np.int8)
+        around = sp.csr_matrix(around)
+        around.eliminate_zeros()
+        around.sort_indices()
+        self.tier2 = (around.indptr.astype(np.int64), around.indices.astype(np.int64))
+
+    def project(self, points, faces):
+        """Barycentrics (a, 3) and signed distances (a,) of ``points`` (a, 3) over ``faces`` (a,).
+
+        Paper eq. 5: s and t from dot products only, no cross product per test.
+        """
+        w = points - self.p0[faces]
+        wu = np.einsum("ij,ij->i", w, self.e1[faces])
+        wv = np.einsum("ij,ij->i", w, self.e2[faces])
+        uu, uv, vv = self.uu[faces], self.uv[faces], self.vv[faces]
+        denom = np.where(self.valid[faces], self.denom[faces], 1.0)
+        s = (uv * wv - vv * wu) / denom
+        t = (uv * wu - uu * wv) / denom
+        bary = np.stack([1.0 - s - t, s, t], axis=1)
+        distance = np.einsum("ij,ij->i", w, self.normal[faces])
+        return bary, distance
+
+
+def _pairs(table, rows, owners):
+    """Candidate pairs from a CSR ``table`` (indptr, ids): (owner index, id) for each row."""
+    positions, which = segment_ranges(table[0], rows)
+    return owners[which], table[1][positions]
+
+
+def _agrees(frames, normals, vertex, face):
+    """Per pair: the face normal has a positive dot with the vertex normal (or it has none)."""
+    dots = np.einsum("ij,ij->i", frames.normal[face], normals[vertex])
+    no_normal = ~normals[vertex].any(axis=1)
+    return (dots > 0.0) | no_normal
+
+
+def _contained(frames, points, normals, vertex, face):
+    """For candidate pairs: (containing mask, agreeing mask, bary, distance)."""
+    bary, distance = frames.project(points[vertex], face)
+    inside = (bary >= -CONTAIN_EPS).all(axis=1) & frames.valid[face]
+    agree = _agrees(frames, normals, vertex, face)
+    return inside & agree, agree, bary, distance
+
+
+def _keep_nearest_planes(vertex, distance, n_vertices, tolerance):
+    """Case 1/3 rule on containing pairs: keep |d| <= 2 |d_min| + tolerance per vertex."""
+    magnitude = np.abs(distance)
+    d_min = np.full(n_vertices, np.inf)
+    np.minimum.at(d_min, vertex, magnitude)
+    return magnitude <= 2.0 * d_min[vertex] + tolerance
+
+
+def _bind_chunk(frames, points, normals, carrier, chunk, ring_disagree):
+    """Associations of the welded vertices ``chunk`` (c,), all with a carrier >= 0.
+
+    Also marks in ``ring_disagree`` (u,) the vertices whose normal disagrees with a face
+    around their carrier. Returns (association parts, case-2 vertices).
+    """
+    out = []
+    pending = chunk
+    for table in (frames.ring, frames.tier2):
+        if pending.size == 0:
+            break
+        vertex, face = _pairs(table, carrier[pending], pending)
+        ok, agree, bary, distance = _contained(frames, points, normals, vertex, face)
+        if table is frames.ring:
+            ring_disagree[vertex[~agree]] = True
+        vertex, face, bary, distance = vertex[ok], face[ok], bary[ok], distance[ok]
+        keep = _keep_nearest_planes(vertex, distance, points.shape[0], frames.tolerance)
+        out.append((vertex[keep], face[keep], bary[keep], distance[keep]))
+        found = np.zeros(points.shape[0], dtype=bool)
+        found[vertex] = True
+        pending = pending[~found[pending]]
+    if pending.size:
+        vertex, candidate = _pairs(frames.closed, carrier[pending], pending)
+        out.append(_bind_around_nearest(frames, points, normals, vertex, candidate, True))
+    return out, pending
+
+
+def _bind_around_nearest(frames, points, normals, vertex, candidate, filter_normals):
+    """Case 2: per vertex, the nearest of its ``candidate`` proxy vertices, then its faces."""
+    gap = points[vertex] - frames.points[candidate]
+    dist2 = np.einsum("ij,ij->i", gap, gap)
+    order = np.lexsort((dist2, vertex))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = vertex[order][1:] != vertex[order][:-1]
+    chosen_vertex, nearest = vertex[order][first], candidate[order][first]
+    v, face = _pairs(frames.ring, nearest, chosen_vertex)
+    usable = frames.valid[face]
+    if filter_normals:
+        agree = _agrees(frames, normals, v, face) & usable
+        any_agree = np.zeros(points.shape[0], dtype=bool)
+        any_agree[v[agree]] = True
+        usable = np.where(any_agree[v], agree, usable)
+    v, face = v[usable], face[usable]
+    bary, distance = frames.project(points[v], face)
+    return v, face, bary, distance
+
+
+def bind_skin(points, normals, carrier, proxy_points, proxy_triangles):
+    """Skin of welded detail ``points`` (u, 3) with unit ``normals`` (u, 3) over the proxy.
+
+    ``carrier`` (u,) is the proxy vertex each detail vertex collapsed into (-1: loose).
+    Returns (:class:`Skin`, ring_disagree (u,) bool: the vertex normal has a negative dot with
+    some face around its carrier).
+    """
+    frames = ProxyFrames(proxy_points, proxy_triangles)
+    u = points.shape[0]
+    case = np.zeros(u, dtype=np.int8)
+    ring_disagree = np.zeros(u, dtype=bool)
+    parts = []
+    bound = np.flatnonzero(carrier >= 0)
+    for start in range(0, bound.size, CHUNK):
+        chunk_parts, case_two = _bind_chunk(frames, points, normals, carrier, bound[start:start + CHUNK],
+                                            ring_disagree)
+        parts.extend(chunk_parts)
+        case[case_two] = CASE_TWO
+    loose = np.flatnonzero(carrier < 0)
+    if loose.size:
+        nearest = cKDTree(proxy_points).query(points[loose])[1]
+        parts.append(_bind_around_nearest(frames, points, normals, loose, nearest.astype(np.int64), False))
+        case[loose] = CASE_LOOSE
+
+    vertex = np.concatenate([p[0] for p in parts])
+    face = np.concatenate([p[1] for p in parts])
+    bary = np.concatenate([p[2] for p in parts])
+    distance = np.concatenate([p[3] for p in parts])
+    order = np.argsort(vertex, kind="stable")
+    vertex, face, bary, distance = vertex[order], face[order], bary[order], distance[order]
+
+    per_vertex = np.bincount(vertex, minlength=u)
+    unset = case == 0
+    case[unset & (per_vertex == 1)] = CASE_ONE
+    case[unset & (per_vertex > 1)] = CASE_THREE
+    area = frames.cross_len[face]
+    weight = area / np.bincount(vertex, weights=area, minlength=u)[vertex]
+    height = distance / np.sqrt(frames.cross_len[face])
+    skin = Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=case)
+    return skin, ring_disagree & normals.any(axis=1)
+
+
+def bound_disagreement(skin, normals, proxy_points, proxy_triangles):
+    """(u,) bool: the vertex normal has a negative dot with a proxy face it is bound to."""
+    face_normal = unit_rows(face_cross(proxy_points, proxy_triangles))[0]
+    dots = np.einsum("ij,ij->i", face_normal[skin.face], normals[skin.vertex])
+    bad = np.zeros(normals.shape[0], dtype=bool)
+    bad[skin.vertex[dots < 0.0]] = True
+    return bad

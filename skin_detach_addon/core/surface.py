@@ -1,0 +1,191 @@
+"""The public object: a detail mesh bound as a skin to a small proxy.
+
+    sds = SkinDetachedSurface.build(vertices (n, 3), triangles (f, 3), target_faces=1000)
+    sds.reconstruct(deformed_proxy (m, 3)) -> (n, 3) detail vertices
+"""
+
+import hashlib
+import json
+import time
+
+import numpy as np
+
+from .errors import SkinDetachError
+from .normal_test import collapse_with_normal_test
+from .prepared_mesh import prepare_mesh
+from .reconstruction import Rebuild, rebuild_matrix
+from .simplification import simplify
+from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement
+from .validation import as_points, as_target_faces, as_triangles, as_vertex_ids
+
+#: Version of the saved format; files of another version are refused.
+FORMAT_VERSION = 1
+FORMAT_TAG = "skin_detach_surface"
+#: With the normal test on, the library simplifies to this many times the target first.
+NORMAL_TEST_OVERSAMPLE = 1.5
+
+_SKIN_FIELDS = ("vertex", "face", "bary", "height", "weight", "case")
+
+
+def topology_fingerprint(n_vertices, triangles):
+    """Hex digest of the vertex count and the triangle index array (f, 3)."""
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(np.int64(n_vertices).tobytes())
+    digest.update(np.ascontiguousarray(triangles, dtype=np.int64).tobytes())
+    return digest.hexdigest()
+
+
+class SkinDetachedSurface:
+    """Detail mesh (n vertices) bound to a proxy (m vertices, k faces).
+
+    proxy_vertices  (m, 3) float64 rest proxy
+    proxy_faces     (k, 3) int64 proxy triangles
+    weld            (n,) int64 welded id of every detail vertex (exact duplicates share one)
+    carrier         (u,) int64 proxy vertex each welded vertex collapsed into (-1: loose)
+    skin            :class:`Skin` over welded ids
+    fingerprint     str, topology of the detail mesh it was built from
+    stats           dict of counts, timings and normal-test figures
+    """
+
+    def __init__(self, proxy_vertices, proxy_faces, weld, carrier, skin, fingerprint, stats):
+        self.proxy_vertices = proxy_vertices
+        self.proxy_faces = proxy_faces
+        self.weld = weld
+        self.carrier = carrier
+        self.skin = skin
+        self.fingerprint = fingerprint
+        self.stats = stats
+        self._rebuild = Rebuild(rebuild_matrix(skin, proxy_faces, proxy_vertices.shape[0], weld), proxy_faces)
+
+    @property
+    def n_detail(self):
+        """Number of detail vertices n."""
+        return self.weld.shape[0]
+
+    @classmethod
+    def build(cls, vertices, triangles, target_faces=1000, normal_test=True):
+        """Simplify, detach the skin and prepare the rebuild of a triangle mesh.
+
+        ``vertices`` (n, 3) float, ``triangles`` (f, 3) int indices into ``vertices``.
+        """
+        start = time.perf_counter()
+        points = as_points("vertices", vertices)
+        faces = as_triangles("triangles", triangles, points.shape[0])
+        target = as_target_faces(target_faces)
+        if not isinstance(normal_test, (bool, np.bool_)):
+            raise SkinDetachError(f"normal_test: expected True or False, got {normal_test!r}")
+
+        mesh = prepare_mesh(points, faces)
+        if mesh.triangles.shape[0] == 0:
+            raise SkinDetachError(
+                f"triangles: expected at least one face of non-zero area, got {faces.shape[0]} degenerate faces")
+        prepared = time.perf_counter()
+
+        proxy = simplify(mesh, target, NORMAL_TEST_OVERSAMPLE if normal_test else 1.0)
+        simplified = time.perf_counter()
+        refused = 0
+        carrier = proxy.carrier
+        proxy_points, proxy_faces = proxy.points, proxy.triangles
+        if normal_test:
+            checked = collapse_with_normal_test(proxy.points, proxy.triangles, proxy.component, proxy.carrier,
+                                                mesh, target)
+            carrier = np.where(carrier >= 0, checked.remap[np.maximum(carrier, 0)], -1)
+            proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
+        tested = time.perf_counter()
+
+        skin, ring_disagree = bind_skin(mesh.points, mesh.normals, carrier, proxy_points, proxy_faces)
+        bound = time.perf_counter()
+        with_normal = max(int(mesh.normals.any(axis=1).sum()), 1)
+        bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
+        ring_share = ring_disagree.sum() / with_normal
+        counts = np.bincount(skin.case, minlength=5)
+        stats = {
+            "detail_vertices": int(points.shape[0]),
+            "detail_faces": int(faces.shape[0]),
+            "proxy_vertices": int(proxy_points.shape[0]),
+            "proxy_faces": int(proxy_faces.shape[0]),
+            "target_faces": target,
+            "target_reached": bool(proxy_faces.shape[0] <= target),
+            "case1": int(counts[CASE_ONE]),
+            "case2": int(counts[CASE_TWO]),
+            "case3": int(counts[CASE_THREE]),
+            "loose": int(counts[CASE_LOOSE]),
+            "associations": int(skin.vertex.shape[0]),
+            "welded_duplicates": mesh.welded_vertices,
+            "dropped_faces": mesh.dropped_faces,
+            "components": int(np.unique(mesh.components[mesh.triangles[:, 0]]).size),
+            "components_kept_whole": proxy.kept_whole,
+            "normal_test": bool(normal_test),
+            "normal_test_refused": int(refused),
+            "normal_disagree_bound": float(bound_share),
+            "normal_disagree_ring": float(ring_share),
+        }
+        surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin,
+                      topology_fingerprint(points.shape[0], faces), stats)
+        done = time.perf_counter()
+        stats["seconds"] = {
+            "prepare": prepared - start, "simplify": simplified - prepared, "normal_test": tested - simplified,
+            "skin": bound - tested, "rebuild_setup": done - bound, "total": done - start,
+        }
+        return surface
+
+    def reconstruct(self, proxy_vertices, out=None):
+        """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3)."""
+        points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
+        return self._rebuild(points, out=out)
+
+    def proxy_vertices_for(self, ids):
+        """Sorted unique proxy vertex ids that carry the detail vertices ``ids``.
+
+        A detail vertex is carried by the proxy vertex it collapsed into (loose vertices: the
+        nearest proxy vertex they are bound around).
+        """
+        detail = as_vertex_ids("ids", ids, self.n_detail)
+        welded = self.weld[detail]
+        carried = self.carrier[welded]
+        loose = carried < 0
+        if loose.any():
+            first = np.searchsorted(self.skin.vertex, welded[loose])
+            corners = self.proxy_faces[self.skin.face[first]]
+            weights = self.skin.bary[first]
+            carried = carried.copy()
+            carried[loose] = corners[np.arange(corners.shape[0]), np.argmax(weights, axis=1)]
+        return np.unique(carried)
+
+    def save(self, path):
+        """Write an .npz file (no pickled objects) that :meth:`load` reads back."""
+        arrays = {f"skin_{name}": getattr(self.skin, name) for name in _SKIN_FIELDS}
+        np.savez(
+            path, format_tag=np.array(FORMAT_TAG), format_version=np.array(FORMAT_VERSION),
+            proxy_vertices=self.proxy_vertices, proxy_faces=self.proxy_faces, weld=self.weld,
+            carrier=self.carrier, fingerprint=np.array(self.fingerprint),
+            stats=np.array(json.dumps(self.stats)), **arrays)
+
+    @classmethod
+    def load(cls, path):
+        """Read a file written by :meth:`save`; refuses pickled content and other versions."""
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {key: data[key] for key in data.files}
+        except (OSError, ValueError, EOFError) as exc:
+            raise SkinDetachError(f"path: expected a skin-detach .npz file, could not read {path!s}: {exc}") from None
+        if str(arrays.get("format_tag", "")) != FORMAT_TAG:
+            raise SkinDetachError(f"path: expected a file with format_tag {FORMAT_TAG!r}, got {path!s}")
+        version = int(arrays.get("format_version", -1))
+        if version != FORMAT_VERSION:
+            raise SkinDetachError(f"path: expected format version {FORMAT_VERSION}, got {version}; rebuild the skin")
+        missing = {"proxy_vertices", "proxy_faces", "weld", "carrier", "fingerprint", "stats"}
+        missing |= {f"skin_{name}" for name in _SKIN_FIELDS}
+        missing -= arrays.keys()
+        if missing:
+            raise SkinDetachError(f"path: expected arrays {sorted(missing)}, they are missing from {path!s}")
+        skin = Skin(**{name: arrays[f"skin_{name}"] for name in _SKIN_FIELDS})
+        proxy_vertices = as_points("proxy_vertices", arrays["proxy_vertices"])
+        proxy_faces = as_triangles("proxy_faces", arrays["proxy_faces"], proxy_vertices.shape[0])
+        if skin.face.size and (skin.face.max() >= proxy_faces.shape[0] or skin.face.min() < 0):
+            raise SkinDetachError("skin_face: expected indices of proxy faces, got values out of range")
+        weld = arrays["weld"].astype(np.int64)
+        if weld.size and (weld.min() < 0 or weld.max() >= skin.case.shape[0]):
+            raise SkinDetachError("weld: expected indices of welded vertices, got values out of range")
+        return cls(proxy_vertices, proxy_faces, weld, arrays["carrier"].astype(np.int64), skin,
+                   str(arrays["fingerprint"]), json.loads(str(arrays["stats"])))

@@ -1,0 +1,75 @@
+"""Checks at the points where arrays enter the core.
+
+Each function returns a clean, contiguous copy-or-view of its input with a fixed dtype, or
+raises :class:`SkinDetachError` naming the argument, what was expected and what was given.
+"""
+
+import numpy as np
+
+from .errors import SkinDetachError
+
+#: Smallest and largest proxy face counts a build accepts.
+MIN_TARGET_FACES = 4
+MAX_TARGET_FACES = 200_000
+
+
+def as_points(name, array, count=None):
+    """``array`` as a C-contiguous (count, 3) float64 array of finite numbers."""
+    try:
+        points = np.ascontiguousarray(array, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise SkinDetachError(f"{name}: expected an (n, 3) array of numbers, got {type(array).__name__} ({exc})") from None
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise SkinDetachError(f"{name}: expected shape (n, 3), got {points.shape}")
+    if count is not None and points.shape[0] != count:
+        raise SkinDetachError(f"{name}: expected shape ({count}, 3), got {points.shape}")
+    if points.shape[0] == 0:
+        raise SkinDetachError(f"{name}: expected at least one point, got an empty array")
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise SkinDetachError(
+            f"{name}: expected finite coordinates, got NaN or inf at {bad.size} row(s), first row {bad[0]}")
+    return points
+
+
+def as_triangles(name, array, n_points):
+    """``array`` as a C-contiguous (f, 3) int64 array of indices into ``n_points`` points."""
+    raw = np.asarray(array)
+    if raw.ndim != 2 or raw.shape[1] != 3:
+        raise SkinDetachError(f"{name}: expected shape (f, 3), got {raw.shape}")
+    if raw.shape[0] == 0:
+        raise SkinDetachError(f"{name}: expected at least one triangle, got an empty array")
+    if raw.dtype.kind not in "iu":
+        if raw.dtype.kind != "f" or not np.isfinite(raw).all() or (raw != np.round(raw)).any():
+            raise SkinDetachError(f"{name}: expected integer vertex indices, got dtype {raw.dtype}")
+    triangles = np.ascontiguousarray(raw, dtype=np.int64)
+    low, high = int(triangles.min()), int(triangles.max())
+    if low < 0 or high >= n_points:
+        raise SkinDetachError(
+            f"{name}: expected indices in [0, {n_points - 1}], got values in [{low}, {high}]")
+    return triangles
+
+
+def as_target_faces(target_faces):
+    """``target_faces`` as an int in [MIN_TARGET_FACES, MAX_TARGET_FACES]."""
+    if isinstance(target_faces, bool) or not isinstance(target_faces, (int, np.integer)):
+        raise SkinDetachError(f"target_faces: expected an integer, got {target_faces!r}")
+    if not MIN_TARGET_FACES <= target_faces <= MAX_TARGET_FACES:
+        raise SkinDetachError(
+            f"target_faces: expected {MIN_TARGET_FACES} to {MAX_TARGET_FACES}, got {target_faces}")
+    return int(target_faces)
+
+
+def as_vertex_ids(name, ids, n_points):
+    """``ids`` as a 1-D int64 array of indices in [0, n_points)."""
+    raw = np.asarray(ids)
+    if raw.size == 0:
+        raise SkinDetachError(f"{name}: expected at least one vertex id, got none")
+    if raw.dtype.kind not in "iu":
+        raise SkinDetachError(f"{name}: expected integer vertex ids, got dtype {raw.dtype}")
+    flat = raw.astype(np.int64).ravel()
+    low, high = int(flat.min()), int(flat.max())
+    if low < 0 or high >= n_points:
+        raise SkinDetachError(f"{name}: expected ids in [0, {n_points - 1}], got values in [{low}, {high}]")
+    return flat

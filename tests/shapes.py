@@ -1,0 +1,91 @@
+"""Small synthetic meshes for the tests: (vertices (n, 3), triangles (f, 3))."""
+
+import numpy as np
+
+
+def grid_solid(x_breaks, y_breaks, z_breaks, occupied):
+    """Closed surface of the occupied cells of a rectilinear grid.
+
+    ``occupied`` (X, Y, Z) bool over cells; returns outward-facing triangles over the grid
+    nodes the surface uses.
+    """
+    occ = np.pad(occupied, 1)
+    nx, ny, nz = len(x_breaks), len(y_breaks), len(z_breaks)
+    node = lambda i, j, k: (i * ny + j) * nz + k  # noqa: E731
+    quads = []
+    for axis in range(3):
+        diff = np.diff(occ.astype(np.int8), axis=axis)
+        for sign in (1, -1):
+            cells = np.argwhere(diff == -sign)  # sign=1: occupied then empty -> faces +axis
+            for c in cells:
+                idx = list(c - 1)
+                idx[axis] += 1  # node-plane index of the shared face
+                a, b = (axis + 1) % 3, (axis + 2) % 3
+                corners = []
+                for da, db in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    p = list(idx)
+                    p[a] += da
+                    p[b] += db
+                    corners.append(node(*p))
+                quads.append(corners if sign == 1 else corners[::-1])
+    quads = np.array(quads)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    used, tris = np.unique(tris, return_inverse=True)
+    gx, gy, gz = np.meshgrid(x_breaks, y_breaks, z_breaks, indexing="ij")
+    points = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)[used]
+    return points, tris.reshape(-1, 3)
+
+
+def closed_mouth(gap=0.01, bump=0.004, hinge=0.1):
+    """Two thick jaws 1 x 0.15 x 0.3 whose facing surfaces are ``gap`` apart (1 % of the
+    length), joined only by a hinge block at x < ``hinge``, with fine bumps on every surface
+    that keep the gap constant. Returns (vertices, triangles, lower mask, upper mask)."""
+    x = np.linspace(0.0, 1.0, 41)
+    jaw = np.linspace(0.0, 0.15, 7)
+    y = np.concatenate([-gap / 2 - jaw[::-1], gap / 2 + jaw])
+    z = np.linspace(0.0, 0.3, 13)
+    occupied = np.ones((40, 13, 12), dtype=bool)
+    occupied[int(round(hinge * 40)):, 6, :] = False  # the gap row of cells, open beyond the hinge
+    points, tris = grid_solid(x, y, z, occupied)
+    points[:, 1] += bump * np.sin(40.0 * points[:, 0]) * np.sin(40.0 * points[:, 2])
+    lower = points[:, 1] < 0.0
+    upper = points[:, 1] > 0.0
+    return points, tris, lower, upper
+
+
+def box(size=(1.0, 1.0, 1.0), cells=(6, 6, 6), offset=(0.0, 0.0, 0.0)):
+    """Closed box surface made of grid cells."""
+    breaks = [np.linspace(0.0, s, c + 1) + o for s, c, o in zip(size, cells, offset)]
+    points, tris = grid_solid(*breaks, np.ones(cells, dtype=bool))
+    return points, tris
+
+
+def plane(n=20, size=1.0):
+    """Open square sheet (n x n quads, split in two triangles each) with gentle waves."""
+    g = np.linspace(0.0, size, n + 1)
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    z = 0.05 * size * np.sin(6.0 * gx / size) * np.cos(5.0 * gy / size)
+    points = np.stack([gx.ravel(), gy.ravel(), z.ravel()], axis=1)
+    ids = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = ids[:-1, :-1].ravel(), ids[1:, :-1].ravel(), ids[1:, 1:].ravel(), ids[:-1, 1:].ravel()
+    return points, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def merge(*meshes):
+    """Concatenate meshes into one with several components."""
+    points, tris, offset = [], [], 0
+    for p, t in meshes:
+        points.append(p)
+        tris.append(t + offset)
+        offset += p.shape[0]
+    return np.concatenate(points), np.concatenate(tris)
+
+
+def random_rotation(seed):
+    q = np.random.default_rng(seed).normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])

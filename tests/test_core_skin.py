@@ -1,0 +1,283 @@
+"""Invariants of the core skin: round trip, rigid motion and scale, exhaustive agreement,
+the closed mouth, several components, messy and bad input, persistence."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import diagonal
+from shapes import box, closed_mouth, merge, plane, random_rotation
+from skin_reference import reference_skin
+from skin_detach_addon.core import SkinDetachedSurface, SkinDetachError
+from skin_detach_addon.core.prepared_mesh import prepare_mesh
+from skin_detach_addon.core.reconstruction import Rebuild, rebuild_matrix
+from skin_detach_addon.core.simplification import simplify
+from skin_detach_addon.core.skin import bind_skin
+
+
+def noisy_box(seed=0):
+    points, tris = box(cells=(5, 5, 5))
+    points = points + np.random.default_rng(seed).normal(scale=0.02, size=points.shape)
+    return points, tris
+
+
+def test_core_never_imports_bpy():
+    code = ("import sys; sys.modules['bpy'] = None; sys.modules['mathutils'] = None; sys.modules['bmesh'] = None\n"
+            "import skin_detach_addon.core, skin_detach_addon.core.obj_io\n"
+            "assert not any(m in sys.modules and sys.modules[m] is not None for m in ('bpy', 'mathutils', 'bmesh'))")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("name", ["spot", "bunny", "armadillo"])
+def test_rest_round_trip_on_bundled_meshes(bundled, name):
+    points, tris = bundled(name)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=1000)
+    rebuilt = sds.reconstruct(sds.proxy_vertices)
+    assert rebuilt.shape == points.shape
+    assert np.abs(rebuilt - points).max() <= 1e-9 * diagonal(points)
+    stats = sds.stats
+    assert stats["case1"] + stats["case2"] + stats["case3"] + stats["loose"] == points.shape[0]
+    assert stats["associations"] >= points.shape[0]
+    assert 0.8 * 1000 <= stats["proxy_faces"] <= 1.25 * 1000
+
+
+@pytest.mark.parametrize("make", [noisy_box, lambda: plane(24), lambda: closed_mouth()[:2],
+                                  lambda: merge(box(), box(offset=(3.0, 0.0, 0.0)))])
+def test_rest_round_trip_on_synthetic_meshes(make):
+    points, tris = make()
+    sds = SkinDetachedSurface.build(points, tris, target_faces=120)
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
+
+
+@pytest.mark.parametrize("make", [lambda b: b("spot"), lambda b: plane(24)])
+def test_rigid_motion_and_uniform_scale_carry_over(bundled, make):
+    points, tris = make(bundled)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    rotation, shift, scale = random_rotation(3), np.array([0.3, -2.0, 5.0]), 2.5
+    moved = sds.reconstruct(scale * sds.proxy_vertices @ rotation.T + shift)
+    expected = scale * points @ rotation.T + shift
+    assert np.abs(moved - expected).max() <= 1e-9 * diagonal(expected)
+
+
+@pytest.mark.parametrize("make", [noisy_box, lambda: plane(12)])
+def test_fast_search_matches_exhaustive_search(make):
+    points, tris = make()
+    points = np.concatenate([points, [[0.5, 0.5, 3.0]]])  # one loose vertex
+    mesh = prepare_mesh(points, tris)
+    proxy = simplify(mesh, 60)
+    fast, _ = bind_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
+    slow = reference_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
+    assert np.array_equal(fast.case, slow.case)
+    key = lambda s: np.lexsort((s.face, s.vertex))  # noqa: E731
+    f, r = key(fast), key(slow)
+    assert np.array_equal(fast.vertex[f], slow.vertex[r])
+    assert np.array_equal(fast.face[f], slow.face[r])
+    for name in ("bary", "height", "weight"):
+        assert np.allclose(getattr(fast, name)[f], getattr(slow, name)[r], rtol=0, atol=1e-9)
+
+
+def test_fast_search_fixtures_reach_every_case():
+    points, tris = noisy_box()
+    mesh = prepare_mesh(points, tris)
+    proxy = simplify(mesh, 60)
+    skin, _ = bind_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
+    assert {1, 2, 3} <= set(np.unique(skin.case).tolist())
+
+
+def _open_mouth(points, proxy, carried, carrier_of, lift):
+    """Deformed proxy: proxy vertices whose carried detail sits above the gap rise by ``lift``
+    (fading to zero across the hinge); the others stay."""
+    moved = proxy.copy()
+    for v in range(proxy.shape[0]):
+        detail = carried[v]
+        if detail.size and points[detail, 1].mean() > 0.0:
+            x = points[detail, 0].mean()
+            moved[v, 1] += lift * min(1.0, x / 0.1)
+    return moved
+
+
+def _mouth_motion(points, tris, lower, upper, skin_points, skin_faces, carrier, skin, weld):
+    lift = 0.2  # 20 % of the jaw length
+    carried = [np.flatnonzero(carrier == v) for v in range(skin_points.shape[0])]
+    moved_proxy = _open_mouth(points, skin_points, carried, carrier, lift)
+    rebuild = Rebuild(rebuild_matrix(skin, skin_faces, skin_points.shape[0], weld), skin_faces)
+    motion = np.linalg.norm(rebuild(moved_proxy) - points, axis=1)
+    away = points[:, 0] > 0.3  # lips well away from the hinge, which must bend
+    return motion[lower & away], motion[upper & away], lift
+
+
+def test_closed_mouth_does_not_tear():
+    points, tris, lower, upper = closed_mouth()
+    diag = diagonal(points)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    lower_motion, upper_motion, lift = _mouth_motion(points, tris, lower, upper, sds.proxy_vertices,
+                                                     sds.proxy_faces, sds.carrier, sds.skin, sds.weld)
+    assert lower_motion.max() <= 1e-3 * diag
+    assert upper_motion.min() >= 0.9 * lift
+
+
+def test_closed_mouth_tears_with_the_papers_own_rules():
+    """The same scenario with the paper's unrestricted candidates mis-attaches lips."""
+    points, tris, lower, upper = closed_mouth()
+    mesh = prepare_mesh(points, tris)
+    proxy = simplify(mesh, 300)
+    skin = reference_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles, paper=True)
+    lower_motion, upper_motion, lift = _mouth_motion(points, tris, lower, upper, proxy.points, proxy.triangles,
+                                                     proxy.carrier, skin, mesh.weld)
+    assert lower_motion.max() > 1e-3 * diagonal(points) or upper_motion.min() < 0.9 * lift
+
+
+def test_components_bind_to_their_own_proxy_part():
+    tiny = (np.array([[10.0, 0, 0], [10.5, 0, 0], [10.0, 0.5, 0]]), np.array([[0, 1, 2]]))
+    sheet = plane(10)
+    parts = [box(), box(offset=(2.0, 0.0, 0.0)), (sheet[0] - [0.0, 0.0, 2.0], sheet[1]), tiny]
+    points, tris = merge(*parts)
+    label = np.concatenate([np.full(p.shape[0], k) for k, (p, _) in enumerate(parts)])
+    sds = SkinDetachedSurface.build(points, tris, target_faces=200)
+    assert sds.stats["components"] == 4
+    assert sds.stats["components_kept_whole"] >= 1
+    proxy_label = np.full(sds.proxy_vertices.shape[0], -1)
+    proxy_label[sds.carrier[sds.weld]] = label
+    face_label = proxy_label[sds.proxy_faces]
+    assert (face_label == face_label[:, :1]).all()
+    assert (face_label[sds.skin.face, 0] == label[sds.skin.vertex]).all()
+
+    moved = sds.proxy_vertices.copy()
+    first = proxy_label == 0
+    moved[first] += [0.0, 0.0, 5.0]
+    rebuilt = sds.reconstruct(moved)
+    assert np.allclose(rebuilt[label == 0], points[label == 0] + [0.0, 0.0, 5.0], atol=1e-9)
+    assert np.abs(rebuilt[label != 0] - points[label != 0]).max() <= 1e-12
+
+
+def test_messy_mesh_builds_and_round_trips():
+    points, tris = box(cells=(4, 4, 4))
+    n = points.shape[0]
+    # Split one vertex into an exact duplicate used by half of its faces.
+    victim = tris[0, 0]
+    dup_faces = np.flatnonzero((tris == victim).any(axis=1))[::2]
+    points = np.concatenate([points, points[victim:victim + 1]])
+    tris = tris.copy()
+    tris[dup_faces] = np.where(tris[dup_faces] == victim, n, tris[dup_faces])
+    extra = [
+        [0, 1, 1],                      # repeated index
+        [tris[0, 0], tris[0, 1], tris[0, 1]],
+        [1, 2, 3] if False else tris[5].tolist(),  # an exact repeated face
+    ]
+    a, b = tris[0, 0], tris[0, 1]
+    fin_tip = points.shape[0]
+    collinear = points.shape[0] + 1
+    unused = points.shape[0] + 2
+    points = np.concatenate([points, [(points[a] + points[b]) / 2 + [0.0, 0.0, 0.3],
+                                      (points[a] + points[b]) / 2, [5.0, 5.0, 5.0]]])
+    extra += [[a, b, fin_tip],          # a third face on an edge: non-manifold
+              [a, b, collinear]]        # zero-area face
+    tris = np.concatenate([tris, np.array(extra)])
+    sds = SkinDetachedSurface.build(points, tris, target_faces=60)
+    assert sds.stats["welded_duplicates"] == 1
+    assert sds.stats["dropped_faces"] >= 3
+    assert sds.stats["loose"] >= 1
+    rest = sds.reconstruct(sds.proxy_vertices)
+    assert np.isfinite(rest).all()
+    assert np.abs(rest - points).max() <= 1e-9 * diagonal(points)
+    moved = sds.reconstruct(sds.proxy_vertices * 1.5 + 1.0)
+    assert np.array_equal(moved[victim], moved[n])
+    assert np.allclose(moved[unused], points[unused] * 1.5 + 1.0, atol=1e-9)
+
+
+def test_edits_reach_only_the_carried_part():
+    points, tris = plane(20)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=100)
+    corner = np.flatnonzero((points[:, 0] < 0.2) & (points[:, 1] < 0.2))
+    carriers = sds.proxy_vertices_for(corner)
+    assert carriers.ndim == 1 and carriers.size >= 1
+    assert np.array_equal(carriers, np.unique(carriers))
+    moved = sds.proxy_vertices.copy()
+    moved[carriers] += [0.0, 0.0, 1.0]
+    motion = sds.reconstruct(moved)[:, 2] - points[:, 2]
+    assert (motion[corner] > 0.0).all()
+    assert np.abs(motion[(points[:, 0] > 0.6) | (points[:, 1] > 0.6)]).max() <= 1e-12
+
+
+BAD_BUILDS = [
+    ("vertices", np.zeros((0, 3)), np.zeros((0, 3), int), {}),
+    ("triangles", np.eye(3), np.zeros((0, 3), int), {}),
+    ("vertices", np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), np.array([[0, 1, 2]]), {}),
+    ("vertices", np.array([[0, 0, 0], [1, 0, 0], [0, np.inf, 0]]), np.array([[0, 1, 2]]), {}),
+    ("vertices", np.zeros((3, 2)), np.array([[0, 1, 2]]), {}),
+    ("triangles", np.eye(3), np.array([[0, 1, 3]]), {}),
+    ("triangles", np.eye(3), np.array([[0, -1, 2]]), {}),
+    ("triangles", np.eye(3), np.array([[0, 1, 2, 0]]), {}),
+    ("triangles", np.eye(3), np.array([[0.0, 1.5, 2.0]]), {}),
+    ("triangles", np.zeros((3, 3)), np.array([[0, 1, 2]]), {}),   # every face degenerate
+    ("target_faces", np.eye(3), np.array([[0, 1, 2]]), {"target_faces": 3}),
+    ("target_faces", np.eye(3), np.array([[0, 1, 2]]), {"target_faces": 10 ** 7}),
+    ("target_faces", np.eye(3), np.array([[0, 1, 2]]), {"target_faces": 100.5}),
+    ("target_faces", np.eye(3), np.array([[0, 1, 2]]), {"target_faces": True}),
+    ("normal_test", np.eye(3), np.array([[0, 1, 2]]), {"normal_test": "yes"}),
+]
+
+
+@pytest.mark.parametrize("argument,points,tris,kwargs", BAD_BUILDS)
+def test_bad_input_is_refused_with_a_clear_message(argument, points, tris, kwargs):
+    with pytest.raises(SkinDetachError, match=argument):
+        SkinDetachedSurface.build(points, tris, **kwargs)
+
+
+def test_bad_proxy_and_ids_are_refused():
+    points, tris = plane(8)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=40)
+    m = sds.proxy_vertices.shape[0]
+    for bad in (np.zeros((m + 1, 3)), np.zeros((m, 2)), np.full((m, 3), np.nan)):
+        with pytest.raises(SkinDetachError, match="proxy_vertices"):
+            sds.reconstruct(bad)
+    for ids in ([], [points.shape[0]], [-1], [0.5]):
+        with pytest.raises(SkinDetachError, match="ids"):
+            sds.proxy_vertices_for(np.array(ids))
+
+
+def test_save_load_round_trip(tmp_path, bundled):
+    points, tris = bundled("spot")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=500)
+    path = tmp_path / "spot_skin.npz"
+    sds.save(path)
+    loaded = SkinDetachedSurface.load(path)
+    moved = sds.proxy_vertices @ random_rotation(7).T * 1.3
+    assert np.array_equal(loaded.reconstruct(moved), sds.reconstruct(moved))
+    assert loaded.fingerprint == sds.fingerprint
+    assert loaded.stats["proxy_faces"] == sds.stats["proxy_faces"]
+    assert np.array_equal(loaded.proxy_vertices_for([0, 1, 2]), sds.proxy_vertices_for([0, 1, 2]))
+
+
+def test_load_refuses_pickles_other_versions_and_junk(tmp_path):
+    points, tris = plane(8)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=40)
+    good = tmp_path / "good.npz"
+    sds.save(good)
+    arrays = dict(np.load(good))
+
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, **{**arrays, "stats": np.array([{"evil": 1}], dtype=object)})
+    with pytest.raises(SkinDetachError):
+        SkinDetachedSurface.load(pickled)
+
+    old = tmp_path / "old.npz"
+    np.savez(old, **{**arrays, "format_version": np.array(0)})
+    with pytest.raises(SkinDetachError, match="version"):
+        SkinDetachedSurface.load(old)
+
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip")
+    with pytest.raises(SkinDetachError, match="path"):
+        SkinDetachedSurface.load(junk)
+
+
+def test_normal_test_reduces_disagreement(bundled):
+    points, tris = bundled("armadillo")
+    on = SkinDetachedSurface.build(points, tris, target_faces=1000, normal_test=True).stats
+    off = SkinDetachedSurface.build(points, tris, target_faces=1000, normal_test=False).stats
+    assert on["normal_disagree_ring"] < 0.8 * off["normal_disagree_ring"]
+    assert on["normal_test_refused"] > 0 and off["normal_test_refused"] == 0
+    assert on["normal_disagree_bound"] <= off["normal_disagree_ring"]
