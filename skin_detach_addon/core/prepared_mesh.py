@@ -68,10 +68,9 @@ def prepare_mesh(points, triangles):
     diagonal = bbox_diagonal(points)
     weld, representatives = weld_map(points)
     if representatives.size == points.shape[0]:
-        unique_points = points
+        unique_points, faces = points, triangles
     else:
-        unique_points = points[representatives]
-    faces = weld[triangles]
+        unique_points, faces = points[representatives], weld[triangles]
 
     distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     cross = face_cross(unique_points, faces)
@@ -90,7 +89,10 @@ def prepare_mesh(points, triangles):
         first = np.flatnonzero(keep)[np.sort(first)]
     else:
         first = np.flatnonzero(keep)
-    kept, kept_cross = faces[first], cross[first]
+    if first.size == faces.shape[0]:
+        kept, kept_cross = faces, cross
+    else:
+        kept, kept_cross = faces[first], cross[first]
     return PreparedMesh(
         points=unique_points,
         weld=weld,

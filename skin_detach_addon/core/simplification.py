@@ -110,9 +110,14 @@ def simplify(mesh, target_faces, oversample=1.0):
     if whole.any():
         ids, local = np.unique(mesh.triangles[whole], return_inverse=True)
         parts.append((ids, mesh.points[ids], local.reshape(-1, 3), np.arange(ids.size)))
-    for label, goal in zip(labels[goals < counts], goals[goals < counts]):
-        ids, local = np.unique(mesh.triangles[face_comp == label], return_inverse=True)
-        parts.append((ids, *simplify_component(mesh.points[ids], local.reshape(-1, 3), goal)))
+    simplified = labels[goals < counts]
+    if simplified.size == 1 and not whole.any() and np.bincount(mesh.triangles.ravel(), minlength=u).all():
+        # One component using every vertex (the usual scan or sculpt): no re-indexing needed.
+        parts.append((np.arange(u), *simplify_component(mesh.points, mesh.triangles, goals[goals < counts][0])))
+    else:
+        for label, goal in zip(simplified, goals[goals < counts]):
+            ids, local = np.unique(mesh.triangles[face_comp == label], return_inverse=True)
+            parts.append((ids, *simplify_component(mesh.points[ids], local.reshape(-1, 3), goal)))
 
     offset = 0
     all_points, all_faces = [], []

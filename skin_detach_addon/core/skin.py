@@ -32,7 +32,7 @@ CONTAIN_EPS = 1e-9
 #: Distance tolerance of the case-3 rule, relative to the proxy's bounding-box diagonal.
 DISTANCE_EPS = 1e-9
 #: Vertices handled per vectorised batch (bounds the memory of the build).
-CHUNK = 131072
+CHUNK = 65536
 
 CASE_ONE, CASE_TWO, CASE_THREE, CASE_LOOSE = 1, 2, 3, 4
 
