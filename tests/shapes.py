@@ -89,3 +89,20 @@ def random_rotation(seed):
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ])
+
+
+def cylinder(radius=0.5, length=8.0, around=16, along=32):
+    """Closed round bar along z from 0 to ``length``: a tube with a fan cap at each end."""
+    angle = 2 * np.pi * np.arange(around) / around
+    z = np.linspace(0.0, length, along + 1)
+    ring = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=1)
+    points = np.concatenate([np.column_stack([np.tile(ring, (along + 1, 1)), np.repeat(z, around)]),
+                             [[0.0, 0.0, 0.0], [0.0, 0.0, length]]])
+    ids = np.arange((along + 1) * around).reshape(along + 1, around)
+    a, b = ids[:-1], np.roll(ids[:-1], -1, axis=1)
+    c, d = ids[1:], np.roll(ids[1:], -1, axis=1)
+    side = np.concatenate([np.stack([a.ravel(), b.ravel(), d.ravel()], 1), np.stack([a.ravel(), d.ravel(), c.ravel()], 1)])
+    low, high = points.shape[0] - 2, points.shape[0] - 1
+    bottom = np.stack([np.full(around, low), np.roll(ids[0], -1), ids[0]], 1)
+    top = np.stack([np.full(around, high), ids[-1], np.roll(ids[-1], -1)], 1)
+    return points, np.concatenate([side, bottom, top])

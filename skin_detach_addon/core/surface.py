@@ -135,22 +135,16 @@ class SkinDetachedSurface:
         return self._rebuild(points, out=out)
 
     def proxy_vertices_for(self, ids):
-        """Sorted unique proxy vertex ids that carry the detail vertices ``ids``.
-
-        A detail vertex is carried by the proxy vertex it collapsed into (loose vertices: the
-        nearest proxy vertex they are bound around).
-        """
+        """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
+        every proxy triangle they are bound to. Moving these rigidly moves the detail vertices
+        rigidly; constraining them makes a handle."""
         detail = as_vertex_ids("ids", ids, self.n_detail)
-        welded = self.weld[detail]
-        carried = self.carrier[welded]
-        loose = carried < 0
-        if loose.any():
-            first = np.searchsorted(self.skin.vertex, welded[loose])
-            corners = self.proxy_faces[self.skin.face[first]]
-            weights = self.skin.bary[first]
-            carried = carried.copy()
-            carried[loose] = corners[np.arange(corners.shape[0]), np.argmax(weights, axis=1)]
-        return np.unique(carried)
+        welded = np.unique(self.weld[detail])
+        start = np.searchsorted(self.skin.vertex, welded)
+        stop = np.searchsorted(self.skin.vertex, welded, side="right")
+        counts = stop - start
+        rows = np.repeat(start, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        return np.unique(self.proxy_faces[self.skin.face[rows]])
 
     def save(self, path):
         """Write an .npz file (no pickled objects) that :meth:`load` reads back."""

@@ -1,0 +1,141 @@
+"""Dual-Laplacian proxy solve: speed, and quality end to end on the bend scenario.
+
+    python scripts/benchmark_deform.py [--mesh armadillo] [--json PATH]
+
+Speed: factor time and warm-started drag-step time for proxies of 1,000 and 5,000 faces.
+Quality: build the skin (5,000-face proxy), constrain the proxy vertices that carry the
+scenario's anchors and handle, solve, rebuild the detail, and compare it with the rest mesh
+and with full-resolution ARAP (libigl, dev-only; skipped when it is not installed). Blender's
+own stack and ARAP as measured for DESIGN.md are printed beside it.
+"""
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from mesh_tools import bundled
+
+from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
+from skin_detach_addon.core.bend_scenario import bend_scenario
+from skin_detach_addon.core.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
+
+DESIGN_ROWS = [
+    ("Blender stack (Laplacian Deform proxy + Surface Deform), DESIGN.md", 0.081, 2.0, 4.3),
+    ("full-resolution ARAP (libigl), DESIGN.md", 0.045, 1.86, 0.0),
+]
+
+
+def proxy_constraints(sds, scenario):
+    """Constrained proxy ids and their targets for a scenario over the detail vertices."""
+    handle = sds.proxy_vertices_for(scenario.handle_ids)
+    anchors = np.setdiff1d(sds.proxy_vertices_for(scenario.anchor_ids), handle)
+    ids = np.concatenate([anchors, handle])
+    targets = np.concatenate([sds.proxy_vertices[anchors], scenario.move(sds.proxy_vertices[handle])])
+    return ids, targets
+
+
+def drag_speed(points, triangles, faces, steps=30):
+    sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
+    scenario = bend_scenario(points)
+    ids, targets = proxy_constraints(sds, scenario)
+    start = time.perf_counter()
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids)
+    factor = time.perf_counter() - start
+    rest = sds.proxy_vertices[ids]
+    previous, times, iterations = None, [], []
+    for k in range(1, steps + 1):
+        start = time.perf_counter()
+        result = solver.solve(rest + (targets - rest) * (k / steps), initial=previous)
+        times.append(time.perf_counter() - start)
+        iterations.append(result.iterations)
+        previous = result.vertices
+    return {"proxy_faces": int(sds.proxy_faces.shape[0]), "factor_ms": 1000 * factor,
+            "step_ms_median": 1000 * float(np.median(times)), "iterations_median": float(np.median(iterations))}
+
+
+def arap_reference(points, triangles, scenario, iterations):
+    try:
+        import igl
+    except ImportError:
+        return None, None
+    fixed = np.concatenate([scenario.anchor_ids, scenario.handle_ids]).astype(np.int32)
+    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    data = igl.ARAPData()
+    data.max_iter = iterations
+    start = time.perf_counter()
+    igl.arap_precomputation(points, triangles.astype(np.int64), 3, fixed, data)
+    result = igl.arap_solve(targets, data, points.copy())
+    return result, time.perf_counter() - start
+
+
+def bend_quality(points, triangles, faces, preserve_volume, arap):
+    scenario = bend_scenario(points)
+    start = time.perf_counter()
+    sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
+    build = time.perf_counter() - start
+    ids, targets = proxy_constraints(sds, scenario)
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume)
+    result = solver.solve(targets, max_iter=200, tol=1e-10)
+    detail = sds.reconstruct(result.vertices)
+    diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    handle_error = np.linalg.norm(detail[scenario.handle_ids] - scenario.move(points[scenario.handle_ids]), axis=1)
+    anchor_error = np.linalg.norm(detail[scenario.anchor_ids] - points[scenario.anchor_ids], axis=1)
+    row = {
+        "preserve_volume": preserve_volume, "proxy_faces": int(sds.proxy_faces.shape[0]), "build_s": build,
+        "iterations": result.iterations, "converged": result.converged,
+        "edge_distortion": edge_distortion(points, detail, triangles),
+        "dihedral_change_deg": dihedral_change(points, detail, triangles),
+        "handle_error_pct_diag": 100 * float(handle_error.mean()) / diag,
+        "anchor_error_pct_diag": 100 * float(anchor_error.mean()) / diag,
+        "proxy_volume_change_pct": 100 * result.volume_change,
+        "detail_volume_change_pct": (100 * (enclosed_volume(detail, triangles) / enclosed_volume(points, triangles) - 1)
+                                     if is_closed(triangles) else float("nan")),
+    }
+    if arap is not None:
+        row["rms_vs_arap_pct_diag"] = 100 * float(np.sqrt(np.mean(np.sum((detail - arap) ** 2, axis=1)))) / diag
+    return row
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mesh", default="armadillo")
+    parser.add_argument("--faces", type=int, default=5000)
+    parser.add_argument("--arap-iterations", type=int, default=50)
+    parser.add_argument("--json")
+    args = parser.parse_args()
+    points, triangles = bundled(args.mesh)
+
+    speed = [drag_speed(points, triangles, faces) for faces in (1000, 5000)]
+    print("## Dual-Laplacian proxy solve (bend scenario, 30 warm-started drag steps, tol 1e-6)\n")
+    print("| proxy faces | factor ms | drag step ms (median) | iterations per step |")
+    print("|---|---|---|---|")
+    for r in speed:
+        print(f"| {r['proxy_faces']} | {r['factor_ms']:.1f} | {r['step_ms_median']:.2f} | {r['iterations_median']:.0f} |")
+
+    arap, arap_s = arap_reference(points, triangles, bend_scenario(points), args.arap_iterations)
+    rows = [bend_quality(points, triangles, args.faces, flag, arap) for flag in (True, False)]
+    print(f"\n## Bend scenario on {args.mesh}.obj ({points.shape[0]:,} vertices), proxy target {args.faces} faces\n")
+    print("| method | edge distortion | dihedral change | handle error | anchor error | volume change (detail) "
+          "| RMS vs ARAP |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        name = f"Skin Detach, volume preservation {'on' if r['preserve_volume'] else 'off'}"
+        rms = f"{r['rms_vs_arap_pct_diag']:.2f} %" if "rms_vs_arap_pct_diag" in r else "n/a"
+        print(f"| {name} | {r['edge_distortion']:.3f} | {r['dihedral_change_deg']:.2f} deg "
+              f"| {r['handle_error_pct_diag']:.2e} % | {r['anchor_error_pct_diag']:.2e} % "
+              f"| {r['detail_volume_change_pct']:+.2f} % | {rms} |")
+    if arap is not None:
+        print(f"| ARAP (libigl, {args.arap_iterations} iterations, this run, {arap_s:.1f} s) "
+              f"| {edge_distortion(points, arap, triangles):.3f} | {dihedral_change(points, arap, triangles):.2f} deg "
+              f"| - | - | {100 * (enclosed_volume(arap, triangles) / enclosed_volume(points, triangles) - 1):+.2f} % | 0 |")
+    for name, edge, dihedral, rms in DESIGN_ROWS:
+        print(f"| {name} | {edge:.3f} | {dihedral:.2f} deg | - | - | - | {rms:.1f} % |")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as handle:
+            json.dump({"speed": speed, "quality": rows}, handle, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,44 @@
+"""The bend scenario every method is judged on (DESIGN section 4).
+
+Take the longest bounding-box axis of ``points`` (n, 3); anchors are the vertices in its
+lowest 10 %, the handle the vertices in its highest 10 %. The handle is rotated 45 degrees
+about its centroid around the shortest axis and shifted by 25 % of the longest extent along
+the middle axis.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class BendScenario:
+    """anchor_ids (a,), handle_ids (h,) vertex ids; rotation (3, 3); pivot (3,); shift (3,)."""
+
+    anchor_ids: np.ndarray
+    handle_ids: np.ndarray
+    rotation: np.ndarray
+    pivot: np.ndarray
+    shift: np.ndarray
+
+    def move(self, points):
+        """``points`` (r, 3) carried by the handle's rigid motion."""
+        return (points - self.pivot) @ self.rotation.T + self.pivot + self.shift
+
+
+def bend_scenario(points, angle_degrees=45.0, shift_fraction=0.25, band=0.10):
+    """:class:`BendScenario` of ``points`` (n, 3)."""
+    extent = points.max(axis=0) - points.min(axis=0)
+    longest, middle, shortest = np.argsort(extent)[::-1]
+    coordinate = points[:, longest]
+    low, high = coordinate.min(), coordinate.max()
+    anchors = np.flatnonzero(coordinate <= low + band * (high - low))
+    handle = np.flatnonzero(coordinate >= high - band * (high - low))
+    theta = np.radians(angle_degrees)
+    axis = np.zeros(3)
+    axis[shortest] = 1.0
+    cross = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rotation = np.eye(3) + np.sin(theta) * cross + (1 - np.cos(theta)) * cross @ cross
+    shift = np.zeros(3)
+    shift[middle] = shift_fraction * extent[longest]
+    return BendScenario(anchors, handle, rotation, points[handle].mean(axis=0), shift)

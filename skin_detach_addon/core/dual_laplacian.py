@@ -1,0 +1,376 @@
+"""Dual Laplacian editing of the proxy (paper section 3.3, after Au, Tai, Liu & Fu 2006).
+
+Arrays: proxy ``points`` (m, 3) indexed by vertex id, ``faces`` (k, 3) indexed by face id.
+
+The dual mesh has one vertex per face, its centroid. Face i has three dual neighbours, the
+faces across its edges v0v1, v1v2, v2v0 (in that order; a boundary edge contributes a ghost,
+the centroid mirrored through the edge midpoint, which is still linear in the vertices; a
+non-manifold edge takes the face whose normal agrees best). At rest the centroid c_i sits at
+signed height h_i above the plane of its neighbours (a, b, c) with normal
+n_i = unit((b - a) x (c - a)); its drop point has barycentric weights w_i in (a, b, c). With
+A = D - sum_j w_ij Q_j (k, m) -- D the centroid operator, Q_j the neighbour operators -- the
+solve minimises ||A X - delta||^2 with delta_i = h_i n_i(X) and the constrained vertices held
+exactly, updating the normals from the current neighbours at each iteration.
+
+The normal equations depend only on which vertices are constrained, so :class:`DualLaplacian`
+factors them once and every solve only back-substitutes.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from .errors import SkinDetachError
+from .geometry import bbox_diagonal, component_labels, cross_rows, unit_rows
+from .validation import as_points, as_triangles, as_vertex_ids
+
+#: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
+DEGENERATE_DUAL = 1e-10
+#: Proximal weight (relative to the mean diagonal of the normal equations) towards the last
+#: iterate: keeps the system definite on odd meshes and vanishes at the fixed point.
+PROXIMAL = 1e-10
+#: Newton steps of the volume multiplier per iteration.
+VOLUME_NEWTON_STEPS = 3
+#: Past iterates mixed by Anderson acceleration of the normal-update iteration.
+ANDERSON_WINDOW = 5
+
+
+class _Anderson:
+    """Anderson acceleration (type II) of a fixed-point iteration x -> g(x), with a restart
+    whenever the residual grows."""
+
+    def __init__(self, window):
+        self.window = window
+        self.xs, self.gs, self.fs = [], [], []
+        self.best = np.inf
+
+    def next(self, x, g, size):
+        """Next iterate from the current one ``x`` and its image ``g`` (arrays of equal shape)."""
+        if size > self.best * 2.0:
+            self.xs, self.gs, self.fs = [], [], []
+        self.best = min(self.best, size)
+        f = (g - x).ravel()
+        self.gs.append(g.ravel())
+        self.fs.append(f)
+        self.gs, self.fs = self.gs[-self.window - 1:], self.fs[-self.window - 1:]
+        if len(self.fs) < 2:
+            return g
+        d_f = np.diff(np.array(self.fs), axis=0).T
+        d_g = np.diff(np.array(self.gs), axis=0).T
+        gamma = np.linalg.lstsq(d_f, f, rcond=None)[0]
+        return (g.ravel() - d_g @ gamma).reshape(g.shape)
+
+
+@dataclass
+class DualLaplacianResult:
+    """vertices (m, 3) deformed proxy; iterations run; converged flag; volume_change
+    V/V_rest - 1 over the closed components (nan if there is none); history (iterations,)
+    mean squared change of the vertices per iteration over the squared bounding-box diagonal."""
+
+    vertices: np.ndarray
+    iterations: int
+    converged: bool
+    volume_change: float
+    history: list = field(default_factory=list)
+
+
+def dual_neighbours(points, faces):
+    """(k, 3) face across edge v0v1, v1v2, v2v0 of every face; -1 on a boundary edge.
+
+    On a non-manifold edge the neighbour is the other face whose normal agrees best.
+    """
+    k = faces.shape[0]
+    m = points.shape[0]
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * m + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    start = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+    count = np.diff(np.r_[start, key.size])
+    out = np.full(k * 3, -1, dtype=np.int64)
+    pairs = start[count == 2]
+    first, second = order[pairs], order[pairs + 1]
+    out[first] = second // 3
+    out[second] = first // 3
+    crowded = start[count > 2]
+    if crowded.size:
+        normals = unit_rows(cross_rows(points[faces[:, 1]] - points[faces[:, 0]],
+                                       points[faces[:, 2]] - points[faces[:, 0]]))[0]
+        for s, c in zip(crowded, count[count > 2]):
+            half_edges = order[s:s + c]
+            owners = half_edges // 3
+            for h, f in zip(half_edges, owners):
+                others = owners[owners != f]
+                if others.size:
+                    out[h] = others[np.argmax(normals[others] @ normals[f])]
+    return out.reshape(k, 3)
+
+
+def _neighbour_operators(faces, neighbours, m):
+    """(3k, m) sparse stack of Q_0, Q_1, Q_2: the neighbour centroid, or the ghost
+    (2/3 (va + vb) - 1/3 vc) across a boundary edge (va vb) with opposite corner vc."""
+    k = faces.shape[0]
+    rows, cols, vals = [], [], []
+    for j in range(3):
+        va, vb, vc = faces[:, j], faces[:, (j + 1) % 3], faces[:, (j + 2) % 3]
+        nb = neighbours[:, j]
+        inner = nb >= 0
+        r = j * k + np.arange(k)
+        for corner in range(3):
+            rows.append(r[inner])
+            cols.append(faces[nb[inner], corner])
+            vals.append(np.full(int(inner.sum()), 1.0 / 3.0))
+        ghost = ~inner
+        for ids, weight in ((va, 2.0 / 3.0), (vb, 2.0 / 3.0), (vc, -1.0 / 3.0)):
+            rows.append(r[ghost])
+            cols.append(ids[ghost])
+            vals.append(np.full(int(ghost.sum()), weight))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * k, m))
+
+
+def _face_frames(points, faces):
+    """Orthonormal frame (e1, e2, n) of every face, each (k, 3)."""
+    e1 = unit_rows(points[faces[:, 1]] - points[faces[:, 0]])[0]
+    n = unit_rows(cross_rows(points[faces[:, 1]] - points[faces[:, 0]], points[faces[:, 2]] - points[faces[:, 0]]))[0]
+    return e1, cross_rows(n, e1), n
+
+
+def closed_components(faces, labels):
+    """Sorted labels (from per-vertex ``labels``) of the watertight components: every directed
+    edge a->b is matched by as many b->a (non-manifold edges with paired sides count as closed)."""
+    face_label = labels[faces[:, 0]]
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * labels.size + np.maximum(a, b)
+    unique, inverse = np.unique(key, return_inverse=True)
+    balance = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=unique.size)
+    open_label = np.unique(np.repeat(face_label, 3)[balance[inverse] != 0])
+    return np.setdiff1d(np.unique(face_label), open_label)
+
+
+def signed_volumes(points, faces, face_label, labels):
+    """(len(labels),) enclosed volume of each component in ``labels`` (per-face ``face_label``)."""
+    if labels.size == 0:
+        return np.zeros(0)
+    p0, p1, p2 = points[faces[:, 0]], points[faces[:, 1]], points[faces[:, 2]]
+    per_face = np.einsum("ij,ij->i", p0, cross_rows(p1, p2)) / 6.0
+    index = np.searchsorted(labels, face_label)
+    valid = (index < labels.size) & (labels[np.minimum(index, labels.size - 1)] == face_label)
+    return np.bincount(index[valid], weights=per_face[valid], minlength=labels.size)
+
+
+class DualLaplacian:
+    """Dual Laplacian solver for one proxy and one set of constrained vertices.
+
+    proxy_vertices (m, 3) rest proxy; proxy_faces (k, 3); constrained_ids (c,) distinct proxy
+    vertex ids held by handles and anchors. Components with no constrained vertex, and
+    vertices no face uses, stay at rest.
+    """
+
+    def __init__(self, proxy_vertices, proxy_faces, constrained_ids, preserve_volume=True):
+        self.rest = as_points("proxy_vertices", proxy_vertices)
+        m = self.rest.shape[0]
+        self.faces = as_triangles("proxy_faces", proxy_faces, m)
+        ids = as_vertex_ids("constrained_ids", constrained_ids, m)
+        if np.unique(ids).size != ids.size:
+            raise SkinDetachError(f"constrained_ids: expected distinct ids, got {ids.size - np.unique(ids).size} repeated")
+        self.constrained = ids
+        self.preserve_volume = bool(preserve_volume)
+        self.diagonal = max(bbox_diagonal(self.rest), 1e-300)
+        k = self.faces.shape[0]
+
+        labels = component_labels(self.faces, m)
+        used = np.zeros(m, dtype=bool)
+        used[self.faces.ravel()] = True
+        held = np.zeros(m, dtype=bool)
+        held[ids] = True
+        active = np.isin(labels, np.unique(labels[ids]))
+        fixed = held | ~active | ~used
+        self.free = np.flatnonzero(~fixed)
+        self.fixed = np.flatnonzero(fixed)
+        self._held_in_fixed = np.searchsorted(self.fixed, ids)
+
+        neighbours = dual_neighbours(self.rest, self.faces)
+        self._q = _neighbour_operators(self.faces, neighbours, m)
+        centroid = sp.csr_matrix((np.full(3 * k, 1.0 / 3.0), (np.repeat(np.arange(k), 3), self.faces.ravel())),
+                                 shape=(k, m))
+        a, b, c = self._neighbour_points(self.rest)
+        c_i = centroid @ self.rest
+        cross = cross_rows(b - a, c - a)
+        normal, length = unit_rows(cross)
+        size = np.maximum.reduce([np.einsum("ij,ij->i", d, d) for d in (b - a, c - a, c - b)])
+        self._paper = length > DEGENERATE_DUAL * np.maximum(size, 1e-300)
+        height = np.einsum("ij,ij->i", c_i - a, normal)
+        drop = c_i - height[:, None] * normal
+        weights = np.full((k, 3), 1.0 / 3.0)
+        weights[self._paper] = _barycentric(drop, a, b, c)[self._paper]
+        self._height = height
+        # Degenerate dual triangles keep their rest offset in the frame of their own face.
+        offset = c_i - np.einsum("ij,ijk->ik", weights, np.stack([a, b, c], axis=1))
+        e1, e2, n = _face_frames(self.rest, self.faces)
+        self._frame_coords = np.stack([np.einsum("ij,ij->i", offset, e) for e in (e1, e2, n)], axis=1)
+
+        self.matrix = self._assemble(centroid, weights)
+        self._a_free = self.matrix[:, self.free].tocsc()
+        self._a_fixed = self.matrix[:, self.fixed].tocsc()
+        normal_eq = (self._a_free.T @ self._a_free).tocsc()
+        self._proximal = PROXIMAL * (normal_eq.diagonal().mean() if self.free.size else 0.0)
+        normal_eq = normal_eq + self._proximal * sp.identity(self.free.size, format="csc")
+        self._lu = splu(normal_eq, permc_spec="MMD_AT_PLUS_A") if self.free.size else None
+        self._a_free_t = self._a_free.T.tocsr()
+
+        self._face_label = labels[self.faces[:, 0]]
+        # Closed components: all are measured; those with a constraint are kept at rest volume.
+        self._all_closed = closed_components(self.faces, labels)
+        self._rest_volume = signed_volumes(self.rest, self.faces, self._face_label, self._all_closed)
+        self._closed = np.intersect1d(self._all_closed, np.unique(labels[ids])) if self.preserve_volume else \
+            np.zeros(0, dtype=np.int64)
+        self._closed_faces = np.flatnonzero(np.isin(self._face_label, self._closed))
+        self._closed_face_slot = np.searchsorted(self._closed, self._face_label[self._closed_faces])
+        self._closed_rest_volume = self._rest_volume[np.searchsorted(self._all_closed, self._closed)]
+        in_closed = np.isin(labels, self._closed)
+        self._free_in_closed = in_closed[self.free]
+        self._vertex_slot = np.where(in_closed, np.searchsorted(self._closed, labels), 0)
+        self._corner_scatter = sp.csr_matrix(
+            (np.ones(3 * k), (self.faces.T.ravel(), np.arange(3 * k))), shape=(m, 3 * k))
+
+    def _assemble(self, centroid, weights):
+        """(k, m) CSR matrix A = D - sum_j diag(w_j) Q_j."""
+        k = self.faces.shape[0]
+        out = centroid.copy()
+        for j in range(3):
+            out = out - sp.diags(weights[:, j]) @ self._q[j * k:(j + 1) * k]
+        return sp.csr_matrix(out)
+
+    def _neighbour_points(self, points):
+        k = self.faces.shape[0]
+        stacked = self._q @ points
+        return stacked[:k], stacked[k:2 * k], stacked[2 * k:]
+
+    def deltas(self, points):
+        """(k, 3) targets h_i n_i(points) of the dual Laplacian rows at ``points`` (m, 3)."""
+        a, b, c = self._neighbour_points(points)
+        normal = unit_rows(cross_rows(b - a, c - a))[0]
+        out = self._height[:, None] * normal
+        odd = ~self._paper
+        if odd.any():
+            e1, e2, n = _face_frames(points, self.faces[odd])
+            coords = self._frame_coords[odd]
+            out[odd] = coords[:, :1] * e1 + coords[:, 1:2] * e2 + coords[:, 2:] * n
+        return out
+
+    def _volume_gradient(self, points):
+        """(m, 3) gradient of the enclosed volume with respect to every vertex."""
+        p0, p1, p2 = points[self.faces[:, 0]], points[self.faces[:, 1]], points[self.faces[:, 2]]
+        return self._corner_scatter @ np.concatenate([cross_rows(p1, p2), cross_rows(p2, p0), cross_rows(p0, p1)]) / 6.0
+
+    def _volume_direction(self, points):
+        """(m, 3) K^-1 grad V on the free vertices of constrained closed components, zero elsewhere."""
+        direction = np.zeros_like(points)
+        if self._closed.size and self.free.size:
+            direction[self.free] = self._lu.solve(np.ascontiguousarray(self._volume_gradient(points)[self.free]))
+            direction[self.free[~self._free_in_closed]] = 0.0
+        return direction
+
+    def _keep_volume(self, points, direction):
+        """``points`` moved by lambda_c ``direction`` per constrained closed component c so that
+        its volume returns to rest. V(X + lambda d) is a cubic in lambda per component."""
+        f = self.faces[self._closed_faces]
+        x0, x1, x2 = points[f[:, 0]], points[f[:, 1]], points[f[:, 2]]
+        d0, d1, d2 = direction[f[:, 0]], direction[f[:, 1]], direction[f[:, 2]]
+        x12, d12 = cross_rows(x1, x2), cross_rows(d1, d2)
+        mixed = cross_rows(d1, x2) + cross_rows(x1, d2)
+        dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
+        per_face = np.stack([dot(x0, x12), dot(d0, x12) + dot(x0, mixed), dot(x0, d12) + dot(d0, mixed),
+                             dot(d0, d12)], axis=1) / 6.0
+        slot = self._closed_face_slot
+        coeffs = np.stack([np.bincount(slot, weights=per_face[:, j], minlength=self._closed.size) for j in range(4)], axis=1)
+        coeffs[:, 0] -= self._closed_rest_volume
+        step = np.zeros(self._closed.size)
+        for _ in range(VOLUME_NEWTON_STEPS):
+            value = coeffs[:, 0] + step * (coeffs[:, 1] + step * (coeffs[:, 2] + step * coeffs[:, 3]))
+            slope = coeffs[:, 1] + step * (2 * coeffs[:, 2] + step * 3 * coeffs[:, 3])
+            safe = np.abs(slope) > 1e-300
+            step[safe] -= value[safe] / slope[safe]
+        return points + step[self._vertex_slot][:, None] * direction
+
+    def volume_change(self, points):
+        """V/V_rest - 1 summed over the closed components (nan if there is none)."""
+        if not self._all_closed.size:
+            return float("nan")
+        rest = self._rest_volume.sum()
+        return float(signed_volumes(points, self.faces, self._face_label, self._all_closed).sum() / rest - 1.0)
+
+    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6):
+        """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3).
+
+        ``initial`` (m, 3), e.g. the previous result while dragging, warm-starts the normals.
+        Stops when the mean squared change of the vertices in one iteration, over the squared
+        bounding-box diagonal, is at most ``tol``, or after ``max_iter`` iterations.
+        """
+        targets = as_points("constrained_positions", constrained_positions, self.constrained.size)
+        points = self.rest.copy() if initial is None else as_points("initial", initial, self.rest.shape[0]).copy()
+        if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+            raise SkinDetachError(f"max_iter: expected a positive integer, got {max_iter!r}")
+        if not (isinstance(tol, (int, float, np.floating)) and np.isfinite(tol) and tol >= 0):
+            raise SkinDetachError(f"tol: expected a finite number >= 0, got {tol!r}")
+        fixed_points = self.rest[self.fixed].copy()
+        fixed_points[self._held_in_fixed] = targets
+        points[self.fixed] = fixed_points
+        if self._lu is None:
+            return DualLaplacianResult(points, 0, True, self.volume_change(points))
+        known = self._a_fixed @ fixed_points
+        keep_volume = self._closed.size > 0
+        free = self.free
+
+        def step(current):
+            """One fixed-point update of the free vertices (n_free, 3) -> (n_free, 3)."""
+            points[free] = current
+            rhs = self._a_free_t @ (self.deltas(points) - known) + self._proximal * current
+            out = points.copy()
+            out[free] = self._lu.solve(np.ascontiguousarray(rhs))
+            if keep_volume:
+                out = self._keep_volume(out, self._volume_direction(out))
+            return out[free]
+
+        history = []
+        converged = False
+        accelerator = _Anderson(ANDERSON_WINDOW)
+        current = points[free].copy()
+        for iterations in range(1, int(max_iter) + 1):
+            mapped = step(current)
+            residual = mapped - current
+            change = float(np.sum(residual * residual)) / (points.shape[0] * self.diagonal ** 2)
+            history.append(change)
+            if change <= tol:
+                current = mapped
+                converged = True
+                break
+            current = accelerator.next(current, mapped, change)
+        points[free] = current
+        return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history)
+
+
+def _barycentric(p, a, b, c):
+    """(r, 3) barycentric weights of points ``p`` in triangles (a, b, c), each (r, 3)."""
+    u, v, w = b - a, c - a, p - a
+    uu = np.einsum("ij,ij->i", u, u)
+    uv = np.einsum("ij,ij->i", u, v)
+    vv = np.einsum("ij,ij->i", v, v)
+    wu = np.einsum("ij,ij->i", w, u)
+    wv = np.einsum("ij,ij->i", w, v)
+    denom = uv * uv - uu * vv
+    denom = np.where(denom != 0.0, denom, 1.0)
+    s = (uv * wv - vv * wu) / denom
+    t = (uv * wu - uu * wv) / denom
+    return np.stack([1.0 - s - t, s, t], axis=1)
+
+
+def deform_proxy(proxy_vertices, proxy_faces, constrained_ids, constrained_positions, preserve_volume=True,
+                 **solve_options):
+    """One-off solve: :class:`DualLaplacian` then :meth:`DualLaplacian.solve`."""
+    solver = DualLaplacian(proxy_vertices, proxy_faces, constrained_ids, preserve_volume=preserve_volume)
+    return solver.solve(constrained_positions, **solve_options)

@@ -1,0 +1,61 @@
+"""Figures that judge a deformation of a mesh against its rest shape (DESIGN section 4).
+
+``rest`` and ``deformed`` are (n, 3) positions of the same vertices, ``triangles`` (f, 3).
+"""
+
+import numpy as np
+
+from .geometry import face_cross, unit_rows
+
+
+def unique_edges(triangles):
+    """(e, 2) sorted vertex pairs of the mesh edges, and (e,) how many faces use each."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    return unique, counts
+
+
+def edge_distortion(rest, deformed, triangles):
+    """Mean over edges of | |e'| / |e| - 1 | (edges of zero rest length are skipped)."""
+    edges, _ = unique_edges(triangles)
+    before = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+    after = np.linalg.norm(deformed[edges[:, 0]] - deformed[edges[:, 1]], axis=1)
+    ok = before > 0
+    return float(np.mean(np.abs(after[ok] / before[ok] - 1.0)))
+
+
+def dihedral_angles(points, triangles):
+    """Dihedral angle (degrees) at every interior edge (exactly two faces), and those edges' face pairs."""
+    k = triangles.shape[0]
+    half = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(k), 3)
+    _, inverse, counts = np.unique(half, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    interior = counts[inverse] == 2
+    order = np.argsort(inverse[interior], kind="stable")
+    faces = owner[interior][order].reshape(-1, 2)
+    return _angles(points, triangles, faces), faces
+
+
+def _angles(points, triangles, faces):
+    normal = unit_rows(face_cross(points, triangles))[0]
+    cosine = np.clip(np.einsum("ij,ij->i", normal[faces[:, 0]], normal[faces[:, 1]]), -1.0, 1.0)
+    return np.degrees(np.arccos(cosine))
+
+
+def dihedral_change(rest, deformed, triangles):
+    """Mean over interior edges of |theta' - theta| in degrees: how much the detail bends."""
+    before, faces = dihedral_angles(rest, triangles)
+    after = _angles(deformed, triangles, faces)
+    return float(np.mean(np.abs(after - before)))
+
+
+def enclosed_volume(points, triangles):
+    """Signed volume enclosed by a closed, consistently oriented triangle mesh."""
+    p0, p1, p2 = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    return float(np.einsum("ij,ij->i", p0, np.cross(p1, p2)).sum() / 6.0)
+
+
+def is_closed(triangles):
+    """Every edge has exactly two faces."""
+    return bool((unique_edges(triangles)[1] == 2).all())
