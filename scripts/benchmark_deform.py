@@ -36,12 +36,12 @@ def proxy_constraints(sds, scenario):
     return ids, targets
 
 
-def drag_speed(points, triangles, faces, steps=30):
+def drag_speed(points, triangles, faces, rigidity, steps=30):
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     scenario = bend_scenario(points)
     ids, targets = proxy_constraints(sds, scenario)
     start = time.perf_counter()
-    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids)
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, rigidity=rigidity)
     factor = time.perf_counter() - start
     rest = sds.proxy_vertices[ids]
     previous, times, iterations = None, [], []
@@ -51,7 +51,7 @@ def drag_speed(points, triangles, faces, steps=30):
         times.append(time.perf_counter() - start)
         iterations.append(result.iterations)
         previous = result.vertices
-    return {"proxy_faces": int(sds.proxy_faces.shape[0]), "factor_ms": 1000 * factor,
+    return {"proxy_faces": int(sds.proxy_faces.shape[0]), "rigidity": rigidity, "factor_ms": 1000 * factor,
             "step_ms_median": 1000 * float(np.median(times)), "iterations_median": float(np.median(iterations))}
 
 
@@ -70,20 +70,21 @@ def arap_reference(points, triangles, scenario, iterations):
     return result, time.perf_counter() - start
 
 
-def bend_quality(points, triangles, faces, preserve_volume, arap):
+def bend_quality(points, triangles, faces, preserve_volume, rigidity, arap):
     scenario = bend_scenario(points)
     start = time.perf_counter()
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     build = time.perf_counter() - start
     ids, targets = proxy_constraints(sds, scenario)
-    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume)
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume,
+                           rigidity=rigidity)
     result = solver.solve(targets, max_iter=200, tol=1e-10)
     detail = sds.reconstruct(result.vertices)
     diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     handle_error = np.linalg.norm(detail[scenario.handle_ids] - scenario.move(points[scenario.handle_ids]), axis=1)
     anchor_error = np.linalg.norm(detail[scenario.anchor_ids] - points[scenario.anchor_ids], axis=1)
     row = {
-        "preserve_volume": preserve_volume, "proxy_faces": int(sds.proxy_faces.shape[0]), "build_s": build,
+        "preserve_volume": preserve_volume, "rigidity": rigidity, "proxy_faces": int(sds.proxy_faces.shape[0]), "build_s": build,
         "iterations": result.iterations, "converged": result.converged,
         "edge_distortion": edge_distortion(points, detail, triangles),
         "dihedral_change_deg": dihedral_change(points, detail, triangles),
@@ -102,26 +103,29 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--mesh", default="armadillo")
     parser.add_argument("--faces", type=int, default=5000)
-    parser.add_argument("--arap-iterations", type=int, default=50)
+    parser.add_argument("--arap-iterations", type=int, default=10,
+                        help="10 is the reference DESIGN.md measured Blender's stack against")
     parser.add_argument("--json")
     args = parser.parse_args()
     points, triangles = bundled(args.mesh)
 
-    speed = [drag_speed(points, triangles, faces) for faces in (1000, 5000)]
+    speed = [drag_speed(points, triangles, faces, rigidity) for rigidity in (0.0, 1.0) for faces in (1000, 5000)]
     print("## Dual-Laplacian proxy solve (bend scenario, 30 warm-started drag steps, tol 1e-6)\n")
-    print("| proxy faces | factor ms | drag step ms (median) | iterations per step |")
-    print("|---|---|---|---|")
+    print("| rigidity | proxy faces | factor ms | drag step ms (median) | iterations per step |")
+    print("|---|---|---|---|---|")
     for r in speed:
-        print(f"| {r['proxy_faces']} | {r['factor_ms']:.1f} | {r['step_ms_median']:.2f} | {r['iterations_median']:.0f} |")
+        print(f"| {r['rigidity']:g} | {r['proxy_faces']} | {r['factor_ms']:.1f} | {r['step_ms_median']:.2f} | {r['iterations_median']:.0f} |")
 
     arap, arap_s = arap_reference(points, triangles, bend_scenario(points), args.arap_iterations)
-    rows = [bend_quality(points, triangles, args.faces, flag, arap) for flag in (True, False)]
+    rows = [bend_quality(points, triangles, args.faces, flag, rigidity, arap)
+            for rigidity in (0.0, 1.0) for flag in (True, False)]
     print(f"\n## Bend scenario on {args.mesh}.obj ({points.shape[0]:,} vertices), proxy target {args.faces} faces\n")
     print("| method | edge distortion | dihedral change | handle error | anchor error | volume change (detail) "
           "| RMS vs ARAP |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        name = f"Skin Detach, volume preservation {'on' if r['preserve_volume'] else 'off'}"
+        kind = "dual Laplacian (paper)" if r["rigidity"] == 0 else f"dual Laplacian + rigidity {r['rigidity']:g}"
+        name = f"Skin Detach, {kind}, volume {'kept' if r['preserve_volume'] else 'free'}"
         rms = f"{r['rms_vs_arap_pct_diag']:.2f} %" if "rms_vs_arap_pct_diag" in r else "n/a"
         print(f"| {name} | {r['edge_distortion']:.3f} | {r['dihedral_change_deg']:.2f} deg "
               f"| {r['handle_error_pct_diag']:.2e} % | {r['anchor_error_pct_diag']:.2e} % "

@@ -183,3 +183,17 @@ def test_bad_input_is_refused():
         solver.solve(points[:3], initial=np.zeros((4, 3)))
     with pytest.raises(SkinDetachError, match="max_iter"):
         solver.solve(points[:3], max_iter=0)
+
+
+def test_rigidity_reduces_stretching_on_the_bend_scenario(armadillo_proxy):
+    points, tris = armadillo_proxy
+    scenario = bend_scenario(points)
+    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    paper = DualLaplacian(points, tris, ids).solve(targets, max_iter=100)
+    rigid = DualLaplacian(points, tris, ids, rigidity=1.0).solve(targets, max_iter=100)
+    assert rigid.converged
+    assert edge_distortion(points, rigid.vertices, tris) <= 0.85 * edge_distortion(points, paper.vertices, tris)
+    assert abs(rigid.volume_change) <= 0.01
+    with pytest.raises(SkinDetachError, match="rigidity"):
+        DualLaplacian(points, tris, ids, rigidity=-1.0)
