@@ -19,6 +19,7 @@ test: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_core.py
+	$(PY) scripts/benchmark_deform.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

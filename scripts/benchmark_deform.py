@@ -27,19 +27,10 @@ DESIGN_ROWS = [
 ]
 
 
-def proxy_constraints(sds, scenario):
-    """Constrained proxy ids and their targets for a scenario over the detail vertices."""
-    handle = sds.proxy_vertices_for(scenario.handle_ids)
-    anchors = np.setdiff1d(sds.proxy_vertices_for(scenario.anchor_ids), handle)
-    ids = np.concatenate([anchors, handle])
-    targets = np.concatenate([sds.proxy_vertices[anchors], scenario.move(sds.proxy_vertices[handle])])
-    return ids, targets
-
-
 def drag_speed(points, triangles, faces, rigidity, steps=30):
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     scenario = bend_scenario(points)
-    ids, targets = proxy_constraints(sds, scenario)
+    ids, targets = scenario.proxy_constraints(sds)
     start = time.perf_counter()
     solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, rigidity=rigidity)
     factor = time.perf_counter() - start
@@ -75,7 +66,7 @@ def bend_quality(points, triangles, faces, preserve_volume, rigidity, arap):
     start = time.perf_counter()
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     build = time.perf_counter() - start
-    ids, targets = proxy_constraints(sds, scenario)
+    ids, targets = scenario.proxy_constraints(sds)
     solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume,
                            rigidity=rigidity)
     result = solver.solve(targets, max_iter=200, tol=1e-10)

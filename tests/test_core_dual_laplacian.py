@@ -18,6 +18,13 @@ def armadillo_proxy(bundled):
     return sds.proxy_vertices, sds.proxy_faces
 
 
+def bend_constraints(points):
+    """Bend scenario applied to the proxy itself: (constrained ids, their targets)."""
+    scenario = bend_scenario(points)
+    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+
+
 def bar_ends(points, length=8.0):
     bottom = np.flatnonzero(points[:, 2] < 0.26)
     top = np.flatnonzero(points[:, 2] > length - 0.26)
@@ -52,8 +59,7 @@ def test_rest_constraints_return_the_rest_proxy(make):
 
 def test_rigid_motion_of_all_constraints_moves_the_whole_proxy(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    ids, _ = bend_constraints(points)
     rotation, shift = random_rotation(11), np.array([1.0, -3.0, 2.0])
     result = DualLaplacian(points, tris, ids).solve(points[ids] @ rotation.T + shift, max_iter=300, tol=1e-20)
     assert np.abs(result.vertices - (points @ rotation.T + shift)).max() <= 1e-6 * diagonal(points)
@@ -61,9 +67,7 @@ def test_rigid_motion_of_all_constraints_moves_the_whole_proxy(armadillo_proxy):
 
 def test_uniform_scale_scales_the_result(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    ids, targets = bend_constraints(points)
     small = DualLaplacian(points, tris, ids).solve(targets, max_iter=30)
     large = DualLaplacian(3.0 * points, tris, ids).solve(3.0 * targets, max_iter=30)
     assert np.abs(large.vertices - 3.0 * small.vertices).max() <= 1e-7 * diagonal(3.0 * points)
@@ -120,9 +124,7 @@ def test_open_multi_component_and_non_manifold_proxies_solve():
 
 def test_normal_update_converges_on_the_bend_scenario(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    ids, targets = bend_constraints(points)
     result = DualLaplacian(points, tris, ids).solve(targets, max_iter=100, tol=1e-9)
     assert result.converged
     assert result.history[-1] < 1e-6 * result.history[0]
@@ -131,9 +133,7 @@ def test_normal_update_converges_on_the_bend_scenario(armadillo_proxy):
 
 def test_volume_preservation_holds_the_bend_within_one_percent(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    ids, targets = bend_constraints(points)
     on = DualLaplacian(points, tris, ids, preserve_volume=True).solve(targets)
     off = DualLaplacian(points, tris, ids, preserve_volume=False).solve(targets)
     assert abs(on.volume_change) <= 0.01
@@ -142,9 +142,7 @@ def test_volume_preservation_holds_the_bend_within_one_percent(armadillo_proxy):
 
 def test_warm_start_reaches_the_cold_solution(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    ids, targets = bend_constraints(points)
     solver = DualLaplacian(points, tris, ids)
     cold = solver.solve(targets, max_iter=200, tol=1e-16)
     previous = None
@@ -187,9 +185,7 @@ def test_bad_input_is_refused():
 
 def test_rigidity_reduces_stretching_on_the_bend_scenario(armadillo_proxy):
     points, tris = armadillo_proxy
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    ids, targets = bend_constraints(points)
     paper = DualLaplacian(points, tris, ids).solve(targets, max_iter=100)
     rigid = DualLaplacian(points, tris, ids, rigidity=1.0).solve(targets, max_iter=100)
     assert rigid.converged

@@ -25,6 +25,14 @@ class BendScenario:
         """``points`` (r, 3) carried by the handle's rigid motion."""
         return (points - self.pivot) @ self.rotation.T + self.pivot + self.shift
 
+    def proxy_constraints(self, surface):
+        """For a scenario over the detail vertices of ``surface`` (a SkinDetachedSurface): the
+        constrained proxy ids (c,) (anchors first, then the handle) and their targets (c, 3)."""
+        handle = surface.proxy_vertices_for(self.handle_ids)
+        anchors = np.setdiff1d(surface.proxy_vertices_for(self.anchor_ids), handle)
+        rest = surface.proxy_vertices
+        return np.concatenate([anchors, handle]), np.concatenate([rest[anchors], self.move(rest[handle])])
+
 
 def bend_scenario(points, angle_degrees=45.0, shift_fraction=0.25, band=0.10):
     """:class:`BendScenario` of ``points`` (n, 3)."""
