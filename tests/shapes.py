@@ -10,7 +10,7 @@ def grid_solid(x_breaks, y_breaks, z_breaks, occupied):
     nodes the surface uses.
     """
     occ = np.pad(occupied, 1)
-    nx, ny, nz = len(x_breaks), len(y_breaks), len(z_breaks)
+    ny, nz = len(y_breaks), len(z_breaks)
     node = lambda i, j, k: (i * ny + j) * nz + k  # noqa: E731
     quads = []
     for axis in range(3):

@@ -164,7 +164,7 @@ def test_messy_mesh_builds_and_round_trips():
     extra = [
         [0, 1, 1],                      # repeated index
         [tris[0, 0], tris[0, 1], tris[0, 1]],
-        [1, 2, 3] if False else tris[5].tolist(),  # an exact repeated face
+        tris[5].tolist(),               # an exact repeated face
     ]
     a, b = tris[0, 0], tris[0, 1]
     fin_tip = points.shape[0]
