@@ -73,10 +73,14 @@ def component_labels(triangles, n_points):
     return connected_components(graph, directed=True, connection="weak")[1]
 
 
-def segment_ranges(indptr, rows):
-    """Flattened CSR positions for ``rows``: (positions, owner) where owner[k] indexes ``rows``."""
-    starts = indptr[rows]
-    counts = indptr[rows + 1] - starts
-    owner = np.repeat(np.arange(rows.size), counts)
+def flat_ranges(starts, stops):
+    """Concatenated ranges [starts[i], stops[i]): (positions, owner) where owner[k] = i."""
+    counts = stops - starts
+    owner = np.repeat(np.arange(starts.size), counts)
     offsets = np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)
     return starts[owner] + offsets, owner
+
+
+def segment_ranges(indptr, rows):
+    """Flattened CSR positions for ``rows``: (positions, owner) where owner[k] indexes ``rows``."""
+    return flat_ranges(indptr[rows], indptr[rows + 1])

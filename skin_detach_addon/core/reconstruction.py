@@ -63,14 +63,16 @@ class Rebuild:
     """
 
     def __init__(self, matrix, proxy_triangles):
-        self.matrix = matrix
         self.triangles = proxy_triangles
+        self.n_detail = matrix.shape[0]
+        self.nnz = matrix.nnz
         self.n_proxy = matrix.shape[1] - proxy_triangles.shape[0]
         self._stacked = np.empty((3, matrix.shape[1]))
-        n = matrix.shape[0]
-        blocks = PARALLEL_BLOCKS if n >= PARALLEL_MIN_ROWS else 1
-        bounds = np.linspace(0, n, blocks + 1).astype(int)
-        self._blocks = [(a, b, matrix[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+        blocks = PARALLEL_BLOCKS if self.n_detail >= PARALLEL_MIN_ROWS else 1
+        bounds = np.linspace(0, self.n_detail, blocks + 1).astype(int)
+        # Only the row blocks are kept (one block is the matrix itself), never the matrix twice.
+        self._blocks = [(0, self.n_detail, matrix)] if blocks == 1 else \
+            [(a, b, matrix[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def _rebuild_rows(self, block, out):
         start, stop, rows = block
@@ -82,7 +84,7 @@ class Rebuild:
         stacked[:, :self.n_proxy] = points.T
         stacked[:, self.n_proxy:] = scaled_normals(points, self.triangles).T
         if out is None:
-            out = np.empty((self.matrix.shape[0], 3))
+            out = np.empty((self.n_detail, 3))
         if len(self._blocks) == 1:
             self._rebuild_rows(self._blocks[0], out)
         else:

@@ -11,6 +11,7 @@ import time
 import numpy as np
 
 from .errors import SkinDetachError
+from .geometry import flat_ranges
 from .normal_test import collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
@@ -140,10 +141,8 @@ class SkinDetachedSurface:
         rigidly; constraining them makes a handle."""
         detail = as_vertex_ids("ids", ids, self.n_detail)
         welded = np.unique(self.weld[detail])
-        start = np.searchsorted(self.skin.vertex, welded)
-        stop = np.searchsorted(self.skin.vertex, welded, side="right")
-        counts = stop - start
-        rows = np.repeat(start, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        rows, _ = flat_ranges(np.searchsorted(self.skin.vertex, welded),
+                              np.searchsorted(self.skin.vertex, welded, side="right"))
         return np.unique(self.proxy_faces[self.skin.face[rows]])
 
     def save(self, path):
