@@ -236,7 +236,9 @@ class DualLaplacian:
         normal_eq = normal_eq.tocsc()
         self._proximal = PROXIMAL * (normal_eq.diagonal().mean() if self.free.size else 0.0)
         normal_eq = normal_eq + self._proximal * sp.identity(self.free.size, format="csc")
-        self._lu = splu(normal_eq, permc_spec="MMD_AT_PLUS_A") if self.free.size else None
+        # Symmetric positive definite: no pivoting, so the fill-reducing order is kept.
+        self._lu = splu(normal_eq, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                        options={"SymmetricMode": True}) if self.free.size else None
         self._a_free_t = self._a_free.T.tocsr()
 
         self._face_label = labels[self.faces[:, 0]]
@@ -256,7 +258,7 @@ class DualLaplacian:
         self._closed_face_sum = sp.csr_matrix((np.ones(n_closed), (self._closed_face_slot, np.arange(n_closed))),
                                               shape=(self._closed.size, n_closed))
         self._closed_scatter = sp.csr_matrix(
-            (np.ones(3 * n_closed), (closed_faces.T.ravel(), np.arange(3 * n_closed))), shape=(m, 3 * n_closed))
+            (np.ones(3 * n_closed), (closed_faces.ravel(), np.repeat(np.arange(n_closed), 3))), shape=(m, n_closed))
 
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
@@ -325,8 +327,8 @@ class DualLaplacian:
         Newton steps. Also returns the volume gradient at the moved points, which the next
         iteration turns into its direction."""
         f = self.faces[self._closed_faces]
-        x0, x1, x2 = points[f[:, 0]], points[f[:, 1]], points[f[:, 2]]
-        d0, d1, d2 = direction[f[:, 0]], direction[f[:, 1]], direction[f[:, 2]]
+        x, d = points[f], direction[f]
+        x0, x1, x2, d0, d1, d2 = x[:, 0], x[:, 1], x[:, 2], d[:, 0], d[:, 1], d[:, 2]
         x12, d12 = cross_rows(x1, x2), cross_rows(d1, d2)
         mixed = cross_rows(d1, x2) + cross_rows(x1, d2)
         dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
@@ -341,9 +343,13 @@ class DualLaplacian:
             safe = np.abs(slope) > 1e-300
             step[safe] -= value[safe] / slope[safe]
         moved = points + step[self._vertex_slot][:, None] * direction
-        p0, p1, p2 = moved[f[:, 0]], moved[f[:, 1]], moved[f[:, 2]]
-        gradient = self._closed_scatter @ np.concatenate([cross_rows(p1, p2), cross_rows(p2, p0), cross_rows(p0, p1)])
-        return moved, gradient / 6.0
+        return moved, self._volume_gradient(x + step[self._closed_face_slot][:, None, None] * d)
+
+    def _volume_gradient(self, corners):
+        """(m, 3) gradient of the closed components' volumes from their faces' ``corners``
+        (f, 3, 3): on a closed component, a sixth of the sum of a vertex's face cross products."""
+        edges = corners[:, 1:] - corners[:, :1]
+        return (self._closed_scatter @ cross_rows(edges[:, 0], edges[:, 1])) / 6.0
 
     def volume_change(self, points):
         """V/V_rest - 1 summed over the closed components (nan if there is none)."""
@@ -391,7 +397,7 @@ class DualLaplacian:
                 return out[free]
             # The volume direction K^-1 grad V (gradient of the last iterate) rides in the same solve.
             if state["gradient"] is None:
-                state["gradient"] = self._keep_volume(points, np.zeros_like(points))[1]
+                state["gradient"] = self._volume_gradient(points[self.faces[self._closed_faces]])
             gradient = state["gradient"][free] * self._free_in_closed[:, None]
             solved = self._lu.solve(np.ascontiguousarray(np.hstack([rhs, gradient])))
             out = points.copy()
