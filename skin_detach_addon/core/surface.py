@@ -64,12 +64,15 @@ class SkinDetachedSurface:
         return self.weld.shape[0]
 
     @classmethod
-    def build(cls, vertices, triangles, target_faces=1000, normal_test=True):
+    def build(cls, vertices, triangles, target_faces=1000, normal_test=True, progress=None):
         """Simplify, detach the skin and prepare the rebuild of a triangle mesh.
 
         ``vertices`` (n, 3) float, ``triangles`` (f, 3) int indices into ``vertices``.
+        ``progress``, if given, is called as ``progress(fraction, stage)`` before each stage.
         """
+        report = progress if progress is not None else (lambda fraction, stage: None)
         start = time.perf_counter()
+        report(0.0, "checking the mesh")
         points = as_points("vertices", vertices)
         faces = as_triangles("triangles", triangles, points.shape[0])
         target = as_target_faces(target_faces)
@@ -81,9 +84,11 @@ class SkinDetachedSurface:
             raise SkinDetachError(
                 f"triangles: expected at least one face of non-zero area, got {faces.shape[0]} degenerate faces")
         prepared = time.perf_counter()
+        report(0.1, "simplifying")
 
         proxy = simplify(mesh, target, NORMAL_TEST_OVERSAMPLE if normal_test else 1.0)
         simplified = time.perf_counter()
+        report(0.5, "normal test")
         refused = 0
         carrier = proxy.carrier
         proxy_points, proxy_faces = proxy.points, proxy.triangles
@@ -93,6 +98,7 @@ class SkinDetachedSurface:
             carrier = np.where(carrier >= 0, checked.remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
         tested = time.perf_counter()
+        report(0.7, "binding the skin")
 
         skin, ring_disagree = bind_skin(mesh.points, mesh.normals, carrier, proxy_points, proxy_faces)
         bound = time.perf_counter()
@@ -121,6 +127,7 @@ class SkinDetachedSurface:
             "normal_disagree_bound": float(bound_share),
             "normal_disagree_ring": float(ring_share),
         }
+        report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin,
                       topology_fingerprint(points.shape[0], faces), stats)
         done = time.perf_counter()
@@ -128,6 +135,7 @@ class SkinDetachedSurface:
             "prepare": prepared - start, "simplify": simplified - prepared, "normal_test": tested - simplified,
             "skin": bound - tested, "rebuild_setup": done - bound, "total": done - start,
         }
+        report(1.0, "done")
         return surface
 
     def reconstruct(self, proxy_vertices, out=None):
@@ -145,14 +153,57 @@ class SkinDetachedSurface:
                               np.searchsorted(self.skin.vertex, welded, side="right"))
         return np.unique(self.proxy_faces[self.skin.face[rows]])
 
+    def to_arrays(self):
+        """Dict of plain numpy arrays (numbers and 0-d strings) that :meth:`from_arrays` reads back."""
+        arrays = {f"skin_{name}": getattr(self.skin, name) for name in _SKIN_FIELDS}
+        arrays.update(format_tag=np.array(FORMAT_TAG), format_version=np.array(FORMAT_VERSION),
+                      proxy_vertices=self.proxy_vertices, proxy_faces=self.proxy_faces, weld=self.weld,
+                      carrier=self.carrier, fingerprint=np.array(self.fingerprint),
+                      stats=np.array(json.dumps(self.stats)))
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays, source="arrays"):
+        """Check and read a dict written by :meth:`to_arrays` (index arrays may come back as int32,
+        flat arrays are reshaped); ``source`` names where it came from in error messages."""
+        if str(arrays.get("format_tag", "")) != FORMAT_TAG:
+            raise SkinDetachError(f"{source}: expected format_tag {FORMAT_TAG!r}, got {str(arrays.get('format_tag'))!r}")
+        version = int(arrays.get("format_version", -1))
+        if version != FORMAT_VERSION:
+            raise SkinDetachError(f"{source}: expected format version {FORMAT_VERSION}, got {version}; rebuild the skin")
+        missing = {"proxy_vertices", "proxy_faces", "weld", "carrier", "fingerprint", "stats"}
+        missing |= {f"skin_{name}" for name in _SKIN_FIELDS}
+        missing -= arrays.keys()
+        if missing:
+            raise SkinDetachError(f"{source}: expected arrays {sorted(missing)}, they are missing")
+        index = lambda key: np.asarray(arrays[key]).astype(np.int64).ravel()  # noqa: E731
+        skin = Skin(vertex=index("skin_vertex"), face=index("skin_face"),
+                    bary=np.asarray(arrays["skin_bary"], dtype=np.float64).reshape(-1, 3),
+                    height=np.asarray(arrays["skin_height"], dtype=np.float64).ravel(),
+                    weight=np.asarray(arrays["skin_weight"], dtype=np.float64).ravel(),
+                    case=np.asarray(arrays["skin_case"]).astype(np.int8).ravel())
+        n_assoc = skin.vertex.shape[0]
+        if not (skin.face.shape[0] == skin.bary.shape[0] == skin.height.shape[0] == skin.weight.shape[0] == n_assoc):
+            raise SkinDetachError(f"{source}: expected skin arrays of {n_assoc} associations each, got lengths "
+                                  f"{[skin.face.shape[0], skin.bary.shape[0], skin.height.shape[0], skin.weight.shape[0]]}")
+        proxy_vertices = as_points("proxy_vertices", np.asarray(arrays["proxy_vertices"], dtype=np.float64).reshape(-1, 3))
+        proxy_faces = as_triangles("proxy_faces", index("proxy_faces").reshape(-1, 3), proxy_vertices.shape[0])
+        if skin.face.size and (skin.face.max() >= proxy_faces.shape[0] or skin.face.min() < 0):
+            raise SkinDetachError(f"{source}: expected skin_face to index the {proxy_faces.shape[0]} proxy faces, "
+                                  f"got values out of range")
+        if n_assoc and (skin.vertex.min() < 0 or skin.vertex.max() >= skin.case.shape[0]):
+            raise SkinDetachError(f"{source}: expected skin_vertex to index the {skin.case.shape[0]} welded vertices, "
+                                  f"got values out of range")
+        weld = index("weld")
+        if weld.size and (weld.min() < 0 or weld.max() >= skin.case.shape[0]):
+            raise SkinDetachError(f"{source}: expected weld to index the {skin.case.shape[0]} welded vertices, "
+                                  f"got values out of range")
+        return cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin,
+                   str(arrays["fingerprint"]), json.loads(str(arrays["stats"])))
+
     def save(self, path):
         """Write an .npz file (no pickled objects) that :meth:`load` reads back."""
-        arrays = {f"skin_{name}": getattr(self.skin, name) for name in _SKIN_FIELDS}
-        np.savez(
-            path, format_tag=np.array(FORMAT_TAG), format_version=np.array(FORMAT_VERSION),
-            proxy_vertices=self.proxy_vertices, proxy_faces=self.proxy_faces, weld=self.weld,
-            carrier=self.carrier, fingerprint=np.array(self.fingerprint),
-            stats=np.array(json.dumps(self.stats)), **arrays)
+        np.savez(path, **self.to_arrays())
 
     @classmethod
     def load(cls, path):
@@ -162,23 +213,4 @@ class SkinDetachedSurface:
                 arrays = {key: data[key] for key in data.files}
         except (OSError, ValueError, EOFError) as exc:
             raise SkinDetachError(f"path: expected a skin-detach .npz file, could not read {path!s}: {exc}") from None
-        if str(arrays.get("format_tag", "")) != FORMAT_TAG:
-            raise SkinDetachError(f"path: expected a file with format_tag {FORMAT_TAG!r}, got {path!s}")
-        version = int(arrays.get("format_version", -1))
-        if version != FORMAT_VERSION:
-            raise SkinDetachError(f"path: expected format version {FORMAT_VERSION}, got {version}; rebuild the skin")
-        missing = {"proxy_vertices", "proxy_faces", "weld", "carrier", "fingerprint", "stats"}
-        missing |= {f"skin_{name}" for name in _SKIN_FIELDS}
-        missing -= arrays.keys()
-        if missing:
-            raise SkinDetachError(f"path: expected arrays {sorted(missing)}, they are missing from {path!s}")
-        skin = Skin(**{name: arrays[f"skin_{name}"] for name in _SKIN_FIELDS})
-        proxy_vertices = as_points("proxy_vertices", arrays["proxy_vertices"])
-        proxy_faces = as_triangles("proxy_faces", arrays["proxy_faces"], proxy_vertices.shape[0])
-        if skin.face.size and (skin.face.max() >= proxy_faces.shape[0] or skin.face.min() < 0):
-            raise SkinDetachError("skin_face: expected indices of proxy faces, got values out of range")
-        weld = arrays["weld"].astype(np.int64)
-        if weld.size and (weld.min() < 0 or weld.max() >= skin.case.shape[0]):
-            raise SkinDetachError("weld: expected indices of welded vertices, got values out of range")
-        return cls(proxy_vertices, proxy_faces, weld, arrays["carrier"].astype(np.int64), skin,
-                   str(arrays["fingerprint"]), json.loads(str(arrays["stats"])))
+        return cls.from_arrays(arrays, source=f"path {path!s}")

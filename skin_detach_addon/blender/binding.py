@@ -1,0 +1,166 @@
+"""The binding of a mesh object, stored in the object's ID properties so it lives in the .blend.
+
+Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom
+Properties panel): the schema version, a binding id, the mesh's topology fingerprint, the
+digest of the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest
+positions (3n float32, the mesh's own vertex order) and the core surface's arrays (float64 or
+int32, flattened). Nothing is pickled or evaluated. The core objects rebuilt from it are cached
+per binding id, so undo and reload find them again or rebuild them from the properties.
+"""
+
+import json
+import uuid
+
+import numpy as np
+
+from ..core.dual_laplacian import DualLaplacian
+from ..core.errors import SkinDetachError
+from ..core.surface import SkinDetachedSurface
+from . import mesh_io
+
+KEY = "_skin_detach"
+SCHEMA_VERSION = 1
+_CACHE = {}
+
+
+class Binding:
+    """Runtime side of one stored binding.
+
+    surface  SkinDetachedSurface over the mesh's n vertices
+    rest     (n, 3) float32 rest positions, exactly as they were in the mesh
+    proxy    the proxy object
+    """
+
+    def __init__(self, binding_id, surface, rest, proxy):
+        self.binding_id = binding_id
+        self.surface = surface
+        self.rest = rest
+        self.proxy = proxy
+        self._solvers = {}
+        self._buffer = np.empty((surface.n_detail, 3))
+
+    def solver(self, ids, preserve_volume):
+        """:class:`DualLaplacian` for the constrained proxy ids (c,), factored once per set;
+        the previous solution of the same set is kept for warm starts."""
+        key = (ids.tobytes(), bool(preserve_volume))
+        if key not in self._solvers:
+            if len(self._solvers) >= 8:
+                self._solvers.pop(next(iter(self._solvers)))
+            self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
+                                                preserve_volume=preserve_volume), None]
+        return self._solvers[key]
+
+    def forget_warm_starts(self):
+        for entry in self._solvers.values():
+            entry[1] = None
+
+    def rebuild(self, proxy_vertices):
+        """(n, 3) detail positions from deformed proxy vertices (m, 3), in a reused buffer."""
+        return self.surface.reconstruct(proxy_vertices, out=self._buffer)
+
+
+def has_binding(obj):
+    return obj is not None and obj.type == 'MESH' and KEY in obj
+
+
+def store(obj, surface, rest, proxy, settings):
+    """Write the binding of ``obj`` (replacing any) and return its :class:`Binding`."""
+    props = {
+        "schema_version": SCHEMA_VERSION,
+        "binding_id": uuid.uuid4().hex,
+        "mesh_fingerprint": mesh_io.mesh_fingerprint(obj.data),
+        "written_digest": mesh_io.positions_digest(rest),
+        "proxy": proxy,
+        "rest": np.ascontiguousarray(rest, dtype=np.float32).ravel(),
+        "settings": dict(settings),
+    }
+    for key, value in surface.to_arrays().items():
+        if value.dtype.kind in "US":
+            props[key] = str(value)
+        elif value.dtype.kind in "iu":
+            props[key] = value.astype(np.int32).ravel()
+        else:
+            props[key] = value.astype(np.float64).ravel()
+    obj[KEY] = props
+    binding = Binding(props["binding_id"], surface, props["rest"].reshape(-1, 3), proxy)
+    _CACHE[binding.binding_id] = binding
+    return binding
+
+
+def open_binding(obj):
+    """:class:`Binding` of ``obj`` after checking that it still fits the mesh and the proxy exists.
+    Raises :class:`SkinDetachError` that says to rebuild when it does not."""
+    if obj is None or obj.type != 'MESH':
+        raise SkinDetachError(f"object: expected a mesh object, got {_describe(obj)}")
+    if KEY not in obj:
+        raise SkinDetachError(f"object {obj.name!r}: expected a Skin Detach binding, it has none; press Build first")
+    props = obj[KEY]
+    version = props.get("schema_version", -1)
+    if version != SCHEMA_VERSION:
+        raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {SCHEMA_VERSION}, got {version}; "
+                              f"press Rebuild")
+    if obj.mode == 'EDIT':
+        raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode (Skin Detach never "
+                              f"writes a mesh under Edit Mode)")
+    fingerprint = mesh_io.mesh_fingerprint(obj.data)
+    if fingerprint != props.get("mesh_fingerprint"):
+        raise SkinDetachError(f"mesh {obj.data.name!r}: expected the topology it was bound with "
+                              f"({len(props['rest']) // 3} vertices), the mesh was edited after binding "
+                              f"(now {len(obj.data.vertices)} vertices, or its faces changed); press Rebuild")
+    proxy = proxy_of(obj)
+    if proxy is None:
+        raise SkinDetachError(f"object {obj.name!r}: expected its proxy object, it was deleted; press Rebuild")
+    binding = _CACHE.get(props["binding_id"])
+    if binding is None:
+        arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+                  for key, value in props.items() if key not in ("proxy", "settings")}
+        surface = SkinDetachedSurface.from_arrays(arrays, source=f"binding of {obj.name!r}")
+        binding = Binding(props["binding_id"], surface, np.asarray(props["rest"], dtype=np.float32).reshape(-1, 3),
+                          proxy)
+        _CACHE[binding.binding_id] = binding
+    binding.proxy = proxy  # never keep a Blender reference across undo or reload
+    return binding
+
+
+def proxy_of(obj):
+    """The proxy object of ``obj``, or None when it has none or it was deleted."""
+    if not has_binding(obj):
+        return None
+    proxy = obj[KEY].get("proxy")
+    # Deleting an object in the viewport unlinks it; the pointer here may keep an orphan alive.
+    if proxy is None or not proxy.users_scene:
+        return None
+    return proxy
+
+
+def check_unedited(obj):
+    """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
+    if mesh_io.positions_digest(mesh_io.read_positions(obj.data)) != obj[KEY].get("written_digest"):
+        raise SkinDetachError(f"mesh {obj.data.name!r}: expected the positions Skin Detach last wrote, they were "
+                              f"edited since (sculpt or Edit Mode?); press Rebuild to bind the new shape, or Reset "
+                              f"to return to the bound rest shape")
+
+
+def mark_written(obj, positions):
+    """Record the digest of the (n, 3) positions just written."""
+    obj[KEY]["written_digest"] = mesh_io.positions_digest(positions)
+
+
+def settings_of(obj):
+    return obj[KEY]["settings"].to_dict() if has_binding(obj) else {}
+
+
+def stats_of(obj):
+    """The core build figures stored with the binding (dict), or {}."""
+    return json.loads(obj[KEY]["stats"]) if has_binding(obj) and "stats" in obj[KEY] else {}
+
+
+def forget(obj):
+    """Remove the stored binding of ``obj`` (the caller removes proxy and handles)."""
+    if KEY in obj:
+        _CACHE.pop(obj[KEY].get("binding_id"), None)
+        del obj[KEY]
+
+
+def _describe(obj):
+    return "nothing" if obj is None else f"{obj.name!r} of type {obj.type}"

@@ -1,0 +1,125 @@
+"""Handles and anchors: empties parented to the proxy, each holding a set of proxy vertices.
+
+A handle carries its proxy vertices by the rigid motion of its empty since it was made: in the
+bound object's local space, ``delta = object_world^-1 @ empty_world @ rest_local^-1`` applied to
+the rest proxy positions. An anchor holds its proxy vertices at rest wherever its empty is.
+Each empty stores under ``empty["_skin_detach_handle"]``: its owner (an ID pointer), kind,
+``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy) and ``rest_local``
+(16 float64, row-major). Handles made from detail vertices survive a Rebuild.
+"""
+
+import numpy as np
+from mathutils import Matrix
+
+from ..core.errors import SkinDetachError
+
+TAG = "_skin_detach_handle"
+HANDLE = "HANDLE"
+ANCHOR = "ANCHOR"
+
+
+def is_handle(obj):
+    return obj is not None and obj.type == 'EMPTY' and TAG in obj
+
+
+def owner_of(empty):
+    return empty[TAG].get("owner") if is_handle(empty) else None
+
+
+def handles_of(obj, proxy=None):
+    """Handle and anchor empties of ``obj``, sorted by name (later names win on shared vertices)."""
+    pool = proxy.children if proxy is not None else _all_objects()
+    return sorted((o for o in pool if is_handle(o) and o[TAG].get("owner") == obj), key=lambda o: o.name)
+
+
+def _all_objects():
+    import bpy
+    return bpy.data.objects
+
+
+def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None, size=1.0):
+    """New empty for ``proxy_ids`` (c,), placed at their centroid in ``current_proxy`` (m, 3) local
+    positions; its rest frame is their centroid in ``rest_proxy`` (m, 3), so an empty made on a
+    deformed mesh starts out where the mesh is."""
+    import bpy
+    if kind not in (HANDLE, ANCHOR):
+        raise SkinDetachError(f"kind: expected {HANDLE!r} or {ANCHOR!r}, got {kind!r}")
+    ids = np.unique(np.asarray(proxy_ids, dtype=np.int64))
+    if ids.size == 0:
+        raise SkinDetachError("selection: expected at least one selected vertex, got none")
+    rest_centroid = rest_proxy[ids].mean(axis=0)
+    now_centroid = current_proxy[ids].mean(axis=0)
+    base = f"{obj.name}_{kind.lower()}"
+    empty = bpy.data.objects.new(_free_name(base), None)
+    empty.empty_display_type = 'SPHERE' if kind == HANDLE else 'CUBE'
+    empty.empty_display_size = size
+    empty.hide_render = True
+    proxy.users_collection[0].objects.link(empty)
+    empty.parent = proxy
+    empty.matrix_parent_inverse = Matrix.Identity(4)
+    empty.matrix_basis = Matrix.Translation(now_centroid.tolist())
+    rest_local = np.eye(4)
+    rest_local[:3, 3] = rest_centroid
+    empty[TAG] = {
+        "owner": obj,
+        "kind": kind,
+        "proxy_ids": ids.astype(np.int32),
+        "detail_ids": np.asarray(detail_ids if detail_ids is not None else [], dtype=np.int32),
+        "rest_local": rest_local.ravel(),
+    }
+    return empty
+
+
+def _free_name(base):
+    import bpy
+    index = 1
+    while f"{base}_{index}" in bpy.data.objects:
+        index += 1
+    return f"{base}_{index}"
+
+
+def remove(empty):
+    import bpy
+    bpy.data.objects.remove(empty, do_unlink=True)
+
+
+def rebind(empty, proxy, proxy_ids, rest_centroid):
+    """After a Rebuild: new ``proxy_ids`` and rest frame, the empty back at rest on the new proxy."""
+    empty.parent = proxy
+    empty.matrix_parent_inverse = Matrix.Identity(4)
+    empty.matrix_basis = Matrix.Translation(rest_centroid.tolist())
+    rest_local = np.eye(4)
+    rest_local[:3, 3] = rest_centroid
+    empty[TAG]["proxy_ids"] = np.asarray(proxy_ids, dtype=np.int32)
+    empty[TAG]["rest_local"] = rest_local.ravel()
+
+
+def local_motion(obj, empty):
+    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made."""
+    world = np.array(obj.matrix_world, dtype=np.float64)
+    rest_local = np.asarray(empty[TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
+    return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ np.linalg.inv(rest_local)
+
+
+def constraints(obj, proxy, rest_proxy):
+    """Constrained proxy ids (c,) sorted, and their targets (c, 3) in local space, from every
+    handle and anchor of ``obj``. Handles override anchors; a later handle overrides an earlier."""
+    empties = handles_of(obj, proxy)
+    m = rest_proxy.shape[0]
+    targets = np.full((m, 3), np.nan)
+    held = np.zeros(m, dtype=bool)
+    for empty in sorted(empties, key=lambda e: e[TAG]["kind"] == HANDLE):
+        ids = np.asarray(empty[TAG]["proxy_ids"], dtype=np.int64)
+        if ids.size == 0 or ids.max() >= m:
+            raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids below {m}, "
+                                  f"got {ids.max() if ids.size else 'none'}; remove it or Rebuild")
+        if empty[TAG]["kind"] == HANDLE:
+            motion = local_motion(obj, empty)
+            if not np.isfinite(motion).all():
+                raise SkinDetachError(f"handle {empty.name!r}: expected an invertible transform, got a degenerate one")
+            targets[ids] = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
+        else:
+            targets[ids] = rest_proxy[ids]
+        held[ids] = True
+    ids = np.flatnonzero(held)
+    return ids, targets[ids]

@@ -1,0 +1,94 @@
+"""Live update: when a handle of a bound object moves by any means (G/R/S, drivers, animation,
+frame change), re-solve without the user pressing anything.
+
+The depsgraph and frame-change handlers only notice (comparing handle transforms with those of
+the last solve) and schedule a timer; the timer does the write, outside the handler. A guard
+stops the write's own depsgraph update from scheduling another. Only scenes whose
+``skin_detach.live_update`` is on are watched; :func:`unregister` removes handlers and timer.
+"""
+
+import bpy
+from bpy.app.handlers import persistent
+
+from ..core.errors import SkinDetachError
+from . import binding as stored
+from .deformation import Deformation, handle_signature, remember_handles, solved_signature
+
+_pending = set()
+_state = {"busy": False}
+#: Last error per object name, shown in the panel.
+ERRORS = {}
+
+
+def bound_objects(scene):
+    return [obj for obj in scene.objects if stored.has_binding(obj)]
+
+
+def notice(scene):
+    """Queue every bound object of ``scene`` whose handles moved since its last solve."""
+    if _state["busy"] or not scene.skin_detach.live_update:
+        return
+    for obj in bound_objects(scene):
+        proxy = stored.proxy_of(obj)
+        if proxy is not None and handle_signature(obj, proxy) != solved_signature(obj):
+            _pending.add(obj.name)
+    if _pending and not bpy.app.timers.is_registered(flush):
+        bpy.app.timers.register(flush, first_interval=0.0)
+
+
+@persistent
+def _on_depsgraph_update(scene, depsgraph=None):
+    notice(scene)
+
+
+@persistent
+def _on_frame_change(scene, depsgraph=None):
+    notice(scene)
+
+
+def flush():
+    """Solve and write every queued object (the timer's body; tests call it directly)."""
+    _state["busy"] = True
+    try:
+        scene = bpy.context.scene
+        for name in sorted(_pending):
+            obj = bpy.data.objects.get(name)
+            if obj is None or not stored.has_binding(obj):
+                continue
+            try:
+                deformation = Deformation(obj, scene.skin_detach.preserve_volume)
+                stored.check_unedited(obj)
+                report = deformation.step()
+                stored.mark_written(obj, report.positions)
+                ERRORS.pop(name, None)
+            except SkinDetachError as exc:
+                ERRORS[name] = str(exc)
+                print(f"Skin Detach live update: {exc}")
+                proxy = stored.proxy_of(obj)
+                if proxy is not None:
+                    remember_handles(obj, proxy)  # report once, not on every later update
+        _pending.clear()
+    finally:
+        _state["busy"] = False
+    return None
+
+
+def pending():
+    return set(_pending)
+
+
+def register():
+    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+    if _on_frame_change not in bpy.app.handlers.frame_change_post:
+        bpy.app.handlers.frame_change_post.append(_on_frame_change)
+
+
+def unregister():
+    for handlers, function in ((bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update),
+                               (bpy.app.handlers.frame_change_post, _on_frame_change)):
+        while function in handlers:
+            handlers.remove(function)
+    if bpy.app.timers.is_registered(flush):
+        bpy.app.timers.unregister(flush)
+    _pending.clear()

@@ -1,0 +1,110 @@
+"""Positions and topology of a Blender mesh as numpy arrays, and the one place that writes them.
+
+Arrays: ``positions`` (n, 3) float32 indexed by vertex index (the mesh's own order);
+``triangles`` (t, 3) int64 vertex indices of the mesh's loop triangles (quads and ngons are
+triangulated here only; the mesh keeps its polygons).
+"""
+
+import numpy as np
+
+from ..core.errors import SkinDetachError
+from ..core.surface import topology_fingerprint
+
+
+def read_positions(mesh):
+    """(n, 3) float32 copy of the vertex positions (the Basis key's when shape keys exist)."""
+    out = np.empty((len(mesh.vertices), 3), dtype=np.float32)
+    if mesh.shape_keys is not None:
+        mesh.shape_keys.reference_key.data.foreach_get("co", out.ravel())
+    else:
+        mesh.attributes["position"].data.foreach_get("vector", out.ravel())
+    return out
+
+
+def read_triangles(mesh):
+    """(t, 3) int64 loop triangles of ``mesh``."""
+    mesh.calc_loop_triangles()
+    out = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("vertices", out)
+    return out.reshape(-1, 3).astype(np.int64)
+
+
+def mesh_fingerprint(mesh):
+    """Digest of the vertex count and the polygons' corner vertices and loop starts: changes when
+    the topology or the vertex order changes, not when positions do."""
+    corners = np.empty(len(mesh.loops), dtype=np.int32)
+    if corners.size:
+        mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+    starts = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    return topology_fingerprint(len(mesh.vertices), np.concatenate([corners, starts]))
+
+
+def positions_digest(positions):
+    """Digest of a (n, 3) float32 position array, to notice edits made outside Skin Detach."""
+    return topology_fingerprint(positions.shape[0], np.ascontiguousarray(positions, dtype=np.float32).view(np.int32))
+
+
+def check_positions(name, positions):
+    """Raise :class:`SkinDetachError` unless ``positions`` (n, 3) are all finite."""
+    bad = ~np.isfinite(positions).all(axis=1)
+    if bad.any():
+        raise SkinDetachError(f"{name}: expected finite vertex positions, got {int(bad.sum())} vertices with NaN "
+                              f"or infinite coordinates (first: {int(np.flatnonzero(bad)[0])})")
+
+
+def write_positions(mesh, positions):
+    """Write (n, 3) ``positions`` into ``mesh``: the position attribute, and with shape keys the
+    Basis, every other key moved by the same offset so that its offset to the Basis stays."""
+    buffer = np.ascontiguousarray(positions, dtype=np.float32).ravel()
+    if buffer.size != 3 * len(mesh.vertices):
+        raise SkinDetachError(f"positions: expected {len(mesh.vertices)} rows for mesh {mesh.name!r}, "
+                              f"got {buffer.size // 3}")
+    keys = mesh.shape_keys
+    if keys is not None:
+        basis = keys.reference_key
+        old = np.empty_like(buffer)
+        basis.data.foreach_get("co", old)
+        shift = buffer.astype(np.float64) - old
+        other = np.empty_like(buffer)
+        for block in keys.key_blocks:
+            if block == basis:
+                continue
+            block.data.foreach_get("co", other)
+            block.data.foreach_set("co", (other + shift).astype(np.float32))
+        basis.data.foreach_set("co", buffer)
+    mesh.attributes["position"].data.foreach_set("vector", buffer)
+    _refresh(mesh)
+
+
+def _refresh(mesh):
+    """Normals and bounds are stale after a bulk attribute write: touch one vertex through RNA
+    (which tags the mesh) and update."""
+    if len(mesh.vertices):
+        mesh.vertices[0].co = mesh.vertices[0].co
+    mesh.update()
+
+
+def snapshot(mesh):
+    """Exact copy of what :func:`write_positions` may change: the positions and every shape key."""
+    keys = mesh.shape_keys
+    blocks = {}
+    if keys is not None:
+        for block in keys.key_blocks:
+            data = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+            block.data.foreach_get("co", data)
+            blocks[block.name] = data
+    positions = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", positions)
+    return positions, blocks
+
+
+def restore(mesh, saved):
+    """Write back a :func:`snapshot`, bit for bit."""
+    positions, blocks = saved
+    if mesh.shape_keys is not None:
+        for block in mesh.shape_keys.key_blocks:
+            if block.name in blocks:
+                block.data.foreach_set("co", blocks[block.name])
+    mesh.attributes["position"].data.foreach_set("vector", positions)
+    _refresh(mesh)

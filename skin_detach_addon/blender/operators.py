@@ -1,0 +1,266 @@
+"""Operators: collect, call, write, report. Every SkinDetachError becomes one ERROR report in
+:meth:`_Operator.execute` / :meth:`DragOperator.invoke`, and nothing has been written by then."""
+
+import bpy
+from mathutils import Vector
+
+from ..core.errors import SkinDetachError
+from . import binding as stored
+from . import handles, skin_rig
+from .deformation import Deformation
+from .drag_session import CANCELLED, FINISHED, DragSession, RegionView
+
+
+def bound_owner(context):
+    """The bound mesh object behind the active object (itself, its proxy or a handle), or None."""
+    obj = skin_rig.owner_of(context.active_object)
+    return obj if stored.has_binding(obj) else None
+
+
+class _Operator:
+    def execute(self, context):
+        try:
+            return self.run(context)
+        except SkinDetachError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+
+
+class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
+    """Bind the active mesh to a small proxy (replacing any earlier binding)"""
+    bl_idname = "skin_detach.build"
+    bl_label = "Build Skin"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        obj = skin_rig.owner_of(context.active_object)
+        return obj is not None and obj.type == 'MESH'
+
+    def run(self, context):
+        obj = skin_rig.owner_of(context.active_object)
+        skin_rig.check_mesh_object(obj)
+        if obj.mode == 'EDIT':
+            bpy.ops.object.mode_set(mode='OBJECT')
+        settings = context.scene.skin_detach
+        wm = context.window_manager
+        status = getattr(context, "workspace", None)
+
+        def progress(fraction, stage):
+            wm.progress_update(int(100 * fraction))
+            if status is not None:
+                status.status_text_set(f"Skin Detach: {stage}...")
+            if bpy.app.background:
+                print(f"Skin Detach build {100 * fraction:3.0f} %: {stage}")
+
+        wm.progress_begin(0, 100)
+        try:
+            stats = skin_rig.build(obj, settings.target_faces, settings.normal_test, progress)
+        finally:
+            wm.progress_end()
+            if status is not None:
+                status.status_text_set(None)
+        kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
+        dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
+        self.report({'INFO'}, (
+            f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
+            f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
+            f"{stats['case3']:,}){kept}{dropped}"))
+        return {'FINISHED'}
+
+
+class _AddOperator(_Operator):
+    kind = handles.HANDLE
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+    def run(self, context):
+        empty = skin_rig.add_from_selection(context, self.kind)
+        ids = len(empty[handles.TAG]["proxy_ids"])
+        self.report({'INFO'}, f"Skin Detach: {empty.name} holds {ids} proxy vertices")
+        return {'FINISHED'}
+
+
+class SKIN_DETACH_OT_add_handle(_AddOperator, bpy.types.Operator):
+    """Make a handle (a hook empty) from the selected vertices of the bound mesh or its proxy"""
+    bl_idname = "skin_detach.add_handle"
+    bl_label = "Add Handle"
+    kind = handles.HANDLE
+
+
+class SKIN_DETACH_OT_add_anchor(_AddOperator, bpy.types.Operator):
+    """Pin the selected vertices of the bound mesh or its proxy in place"""
+    bl_idname = "skin_detach.add_anchor"
+    bl_label = "Add Anchor"
+    kind = handles.ANCHOR
+
+
+def _named_handle(context, name):
+    if name:
+        empty = bpy.data.objects.get(name)
+        if not handles.is_handle(empty):
+            raise SkinDetachError(f"name: expected a Skin Detach handle or anchor, got {name!r}")
+        return empty
+    if handles.is_handle(context.active_object):
+        return context.active_object
+    raise SkinDetachError("handle: expected an active handle or anchor empty, got "
+                          f"{context.active_object.name if context.active_object else 'nothing'!r}")
+
+
+class SKIN_DETACH_OT_remove_handle(_Operator, bpy.types.Operator):
+    """Remove a handle or anchor (the active one, or the one named)"""
+    bl_idname = "skin_detach.remove_handle"
+    bl_label = "Remove Handle"
+    bl_options = {'REGISTER', 'UNDO'}
+    name: bpy.props.StringProperty(name="Handle", default="")
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+    def run(self, context):
+        empty = _named_handle(context, self.name)
+        name = empty.name
+        handles.remove(empty)
+        self.report({'INFO'}, f"Skin Detach: removed {name}")
+        return {'FINISHED'}
+
+
+class SKIN_DETACH_OT_select_handle(_Operator, bpy.types.Operator):
+    """Make the named handle or anchor the active object"""
+    bl_idname = "skin_detach.select_handle"
+    bl_label = "Select Handle"
+    bl_options = {'REGISTER', 'UNDO'}
+    name: bpy.props.StringProperty(name="Handle", default="")
+
+    def run(self, context):
+        empty = _named_handle(context, self.name)
+        for obj in context.selected_objects:
+            obj.select_set(False)
+        empty.select_set(True)
+        context.view_layer.objects.active = empty
+        return {'FINISHED'}
+
+
+def _solve(context, obj):
+    """One checked solve from the current handle transforms, written back; returns its report."""
+    context.view_layer.update()
+    deformation = Deformation(obj, context.scene.skin_detach.preserve_volume)
+    stored.check_unedited(obj)
+    report = deformation.step()
+    stored.mark_written(obj, report.positions)
+    return report
+
+
+class SKIN_DETACH_OT_apply(_Operator, bpy.types.Operator):
+    """Deform the mesh from the current transforms of all its handles"""
+    bl_idname = "skin_detach.apply"
+    bl_label = "Apply Handles"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+    def run(self, context):
+        report = _solve(context, bound_owner(context))
+        self.report({'INFO'}, f"Skin Detach: solved in {report.milliseconds:.1f} ms ({report.iterations} iterations)")
+        return {'FINISHED'}
+
+
+class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
+    """Drag the active handle with the mouse; the mesh follows on every move"""
+    bl_idname = "skin_detach.drag"
+    bl_label = "Drag Handle"
+    bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
+    offset: bpy.props.FloatVectorProperty(name="Offset", subtype='TRANSLATION', size=3,
+                                          description="World-space move of the handle (scripted use)")
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None and handles.is_handle(context.active_object) and \
+            context.active_object[handles.TAG]["kind"] == handles.HANDLE
+
+    def run(self, context):
+        """Scripted path: move the active handle by ``offset`` and solve."""
+        empty = context.active_object
+        world = empty.matrix_world.copy()
+        world.translation += Vector(self.offset)
+        empty.matrix_world = world
+        _solve(context, bound_owner(context))
+        return {'FINISHED'}
+
+    def invoke(self, context, event):
+        if context.area is None or context.area.type != 'VIEW_3D':
+            return self.execute(context)
+        try:
+            self.session = DragSession(bound_owner(context), context.active_object,
+                                       RegionView(context.region, context.region_data),
+                                       (event.mouse_region_x, event.mouse_region_y),
+                                       context.scene.skin_detach.preserve_volume)
+        except SkinDetachError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        context.area.header_text_set(self.session.header)
+        context.window_manager.modal_handler_add(self)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        try:
+            state = self.session.event(event.type, event.value, (event.mouse_region_x, event.mouse_region_y))
+        except SkinDetachError as exc:
+            self.session.cancel()
+            self.report({'ERROR'}, str(exc))
+            state = CANCELLED
+        if state in (FINISHED, CANCELLED):
+            context.area.header_text_set(None)
+            if state == FINISHED and self.session.step_ms:
+                ms = sorted(self.session.step_ms)[len(self.session.step_ms) // 2]
+                self.report({'INFO'}, f"Skin Detach: {len(self.session.step_ms)} steps, median {ms:.1f} ms")
+            return {state}
+        context.area.header_text_set(self.session.header)
+        return {'RUNNING_MODAL'}
+
+
+class SKIN_DETACH_OT_reset(_Operator, bpy.types.Operator):
+    """Put the mesh, proxy and handles back to the rest shape (the binding stays)"""
+    bl_idname = "skin_detach.reset"
+    bl_label = "Reset to Rest"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+    def run(self, context):
+        Deformation(bound_owner(context)).reset()
+        self.report({'INFO'}, "Skin Detach: back to the rest shape")
+        return {'FINISHED'}
+
+
+class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
+    """Remove the proxy, the handles and the binding (the mesh keeps its current shape)"""
+    bl_idname = "skin_detach.clear"
+    bl_label = "Clear Skin"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        obj = skin_rig.owner_of(context.active_object)
+        return obj is not None and stored.has_binding(obj)
+
+    def run(self, context):
+        obj = bound_owner(context)
+        if context.active_object is not obj:
+            context.view_layer.objects.active = obj
+        skin_rig.clear(obj)
+        self.report({'INFO'}, f"Skin Detach: cleared {obj.name}")
+        return {'FINISHED'}
+
+
+CLASSES = (SKIN_DETACH_OT_build, SKIN_DETACH_OT_add_handle, SKIN_DETACH_OT_add_anchor, SKIN_DETACH_OT_remove_handle,
+           SKIN_DETACH_OT_select_handle, SKIN_DETACH_OT_apply, SKIN_DETACH_OT_drag, SKIN_DETACH_OT_reset,
+           SKIN_DETACH_OT_clear)

@@ -1,0 +1,71 @@
+"""The "Skin Detach" tab of the 3D View sidebar."""
+
+import bpy
+
+from . import binding as stored
+from . import handles, skin_rig
+from .deformation import last_step_ms
+from .live_update import ERRORS
+
+
+class VIEW3D_PT_skin_detach(bpy.types.Panel):
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "Skin Detach"
+    bl_label = "Skin Detach"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.skin_detach
+        obj = skin_rig.owner_of(context.active_object)
+
+        box = layout.box()
+        box.label(text="Build", icon='MOD_DECIM')
+        box.prop(settings, "target_faces")
+        box.prop(settings, "normal_test")
+        bound = stored.has_binding(obj)
+        box.operator("skin_detach.build", text="Rebuild" if bound else "Build", icon='FILE_REFRESH')
+        if obj is None or obj.type != 'MESH':
+            layout.label(text="Select a mesh object", icon='INFO')
+            return
+        if not bound:
+            layout.label(text=f"{obj.name}: not bound", icon='INFO')
+            return
+
+        box = layout.box()
+        box.label(text="Handles", icon='EMPTY_AXIS')
+        row = box.row(align=True)
+        row.operator("skin_detach.add_handle", icon='ADD')
+        row.operator("skin_detach.add_anchor", icon='PINNED')
+        for empty in handles.handles_of(obj, stored.proxy_of(obj)):
+            row = box.row(align=True)
+            icon = 'EMPTY_AXIS' if empty[handles.TAG]["kind"] == handles.HANDLE else 'PINNED'
+            select = row.operator("skin_detach.select_handle", text=empty.name, icon=icon,
+                                  depress=empty == context.active_object)
+            select.name = empty.name
+            row.operator("skin_detach.remove_handle", text="", icon='X').name = empty.name
+
+        box = layout.box()
+        box.label(text="Deform", icon='MOD_SIMPLEDEFORM')
+        box.prop(settings, "preserve_volume")
+        box.operator("skin_detach.drag", icon='VIEW_PAN')
+        row = box.row(align=True)
+        row.operator("skin_detach.apply", icon='CHECKMARK')
+        row.prop(settings, "live_update", toggle=True, icon='PLAY')
+        row = box.row(align=True)
+        row.operator("skin_detach.reset", icon='LOOP_BACK')
+        row.operator("skin_detach.clear", icon='TRASH')
+        if obj.name in ERRORS:
+            box.label(text=ERRORS[obj.name], icon='ERROR')
+
+        stats = stored.stats_of(obj)
+        box = layout.box()
+        box.label(text="Figures", icon='INFO')
+        box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
+        box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
+        box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")
+        ms = last_step_ms(obj)
+        box.label(text=f"Last step: {ms:.1f} ms" if ms is not None else "Last step: -")
+
+
+CLASSES = (VIEW3D_PT_skin_detach,)

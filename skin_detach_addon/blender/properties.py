@@ -1,0 +1,35 @@
+"""Scene settings shown in the panel (saved with the .blend; no drag state lives here)."""
+
+import bpy
+
+
+def _toggle_live(self, context):
+    from . import live_update
+    if self.live_update:
+        live_update.notice(context.scene)
+
+
+class SkinDetachSettings(bpy.types.PropertyGroup):
+    target_faces: bpy.props.IntProperty(
+        name="Proxy Faces", description="Number of faces of the proxy the detail mesh is bound to",
+        default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000)
+    normal_test: bpy.props.BoolProperty(
+        name="Normal Test", default=True,
+        description="Refuse proxy edge collapses that would turn proxy faces away from the detail they carry")
+    preserve_volume: bpy.props.BoolProperty(
+        name="Preserve Volume", default=True,
+        description="Keep the enclosed volume of closed proxies while deforming")
+    live_update: bpy.props.BoolProperty(
+        name="Live Update", default=False, update=_toggle_live,
+        description="Deform the mesh whenever a handle moves (G/R/S, drivers, animation, frame change)")
+
+
+CLASSES = (SkinDetachSettings,)
+
+
+def register():
+    bpy.types.Scene.skin_detach = bpy.props.PointerProperty(type=SkinDetachSettings)
+
+
+def unregister():
+    del bpy.types.Scene.skin_detach

@@ -1,0 +1,166 @@
+"""The rig around a bound mesh: building the binding and its proxy object, handles from a
+selection, and clearing it all. The mesh's own data is only read here, never written.
+"""
+
+import numpy as np
+from mathutils import Matrix
+
+from ..core.errors import SkinDetachError
+from ..core.geometry import bbox_diagonal
+from ..core.surface import SkinDetachedSurface
+from . import binding as stored
+from . import handles, mesh_io
+
+COLLECTION = "Skin Detach"
+PROXY_TAG = "_skin_detach_proxy_of"
+
+
+def check_mesh_object(obj):
+    """Raise unless ``obj`` is a mesh object with vertices and faces."""
+    if obj is None:
+        raise SkinDetachError("object: expected an active mesh object, got nothing active")
+    if obj.type != 'MESH':
+        raise SkinDetachError(f"object {obj.name!r}: expected a mesh object, got type {obj.type}")
+    if PROXY_TAG in obj:
+        raise SkinDetachError(f"object {obj.name!r}: expected a detail mesh, got a Skin Detach proxy; "
+                              f"select the original mesh")
+    if len(obj.data.vertices) == 0 or len(obj.data.polygons) == 0:
+        raise SkinDetachError(f"mesh {obj.data.name!r}: expected vertices and faces, got "
+                              f"{len(obj.data.vertices)} vertices and {len(obj.data.polygons)} faces")
+
+
+def owner_of(obj):
+    """The bound mesh object that ``obj`` belongs to (itself, its proxy's owner or its handle's owner)."""
+    if obj is None:
+        return None
+    if handles.is_handle(obj):
+        return handles.owner_of(obj)
+    if PROXY_TAG in obj:
+        return obj[PROXY_TAG]
+    return obj
+
+
+def build(obj, target_faces=1000, normal_test=True, progress=None):
+    """Bind ``obj`` (Object Mode) and make its proxy object; returns the core build stats.
+    A previous binding is replaced: its proxy goes, handles made from detail vertices are
+    carried over to the new proxy (back at rest), handles made from proxy vertices are removed."""
+    check_mesh_object(obj)
+    mesh = obj.data
+    positions = mesh_io.read_positions(mesh)
+    mesh_io.check_positions(f"mesh {mesh.name!r}", positions)
+    triangles = mesh_io.read_triangles(mesh)
+    surface = SkinDetachedSurface.build(positions.astype(np.float64), triangles, target_faces=target_faces,
+                                        normal_test=normal_test, progress=progress)
+    old = handles.handles_of(obj)
+    _remove_proxy(obj)
+    proxy = _make_proxy(obj, surface)
+    stored.store(obj, surface, positions, proxy,
+                 {"target_faces": int(target_faces), "normal_test": bool(normal_test)})
+    kept = removed = 0
+    for empty in old:
+        detail = np.asarray(empty[handles.TAG]["detail_ids"], dtype=np.int64)
+        if detail.size and detail.max() < surface.n_detail:
+            ids = surface.proxy_vertices_for(detail)
+            handles.rebind(empty, proxy, ids, surface.proxy_vertices[ids].mean(axis=0))
+            kept += 1
+        else:
+            handles.remove(empty)
+            removed += 1
+    stats = dict(surface.stats)
+    stats["handles_kept"], stats["handles_removed"] = kept, removed
+    return stats
+
+
+def _make_proxy(obj, surface):
+    import bpy
+    points, faces = surface.proxy_vertices, surface.proxy_faces
+    name = f"{obj.name}_proxy"
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(points.shape[0])
+    mesh.loops.add(faces.size)
+    mesh.polygons.add(faces.shape[0])
+    mesh.vertices.foreach_set("co", points.astype(np.float32).ravel())
+    mesh.loops.foreach_set("vertex_index", faces.astype(np.int32).ravel())
+    mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
+    mesh.update()
+    proxy = bpy.data.objects.new(name, mesh)
+    _collection().objects.link(proxy)
+    proxy.parent = obj
+    proxy.matrix_parent_inverse = Matrix.Identity(4)
+    proxy.matrix_basis = Matrix.Identity(4)
+    proxy.display_type = 'WIRE'
+    proxy.show_in_front = True
+    proxy.hide_render = True
+    proxy[PROXY_TAG] = obj
+    return proxy
+
+
+def _collection():
+    import bpy
+    scene = bpy.context.scene
+    collection = bpy.data.collections.get(COLLECTION)
+    if collection is None:
+        collection = bpy.data.collections.new(COLLECTION)
+    if collection.name not in scene.collection.children:
+        scene.collection.children.link(collection)
+    return collection
+
+
+def _remove_proxy(obj):
+    import bpy
+    if stored.has_binding(obj):
+        proxy = obj[stored.KEY].get("proxy")
+        if proxy is not None:
+            mesh = proxy.data
+            bpy.data.objects.remove(proxy, do_unlink=True)
+            if mesh.users == 0:
+                bpy.data.meshes.remove(mesh)
+
+
+def handle_size(obj):
+    return 0.03 * bbox_diagonal(np.array([v[:] for v in obj.bound_box]))
+
+
+def add_from_selection(context, kind):
+    """New handle or anchor from the selected vertices of the active object: the bound mesh
+    (Edit Mode selection; Edit Mode is left first so the selection is current) or its proxy."""
+    import bpy
+    active = context.active_object
+    obj = owner_of(active)
+    if obj is None or not stored.has_binding(obj):
+        raise SkinDetachError(f"object: expected a bound mesh or its proxy, got {_name(active)}; press Build first")
+    if active.mode == 'EDIT':
+        bpy.ops.object.mode_set(mode='OBJECT')
+    if obj.mode == 'EDIT':
+        raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode")
+    binding = stored.open_binding(obj)
+    selected = np.zeros(len(active.data.vertices), dtype=bool)
+    active.data.vertices.foreach_get("select", selected)
+    picked = np.flatnonzero(selected)
+    if picked.size == 0:
+        raise SkinDetachError(f"selection: expected selected vertices on {active.name!r}, got none "
+                              f"(select some in Edit Mode)")
+    if active == obj:
+        detail, proxy_ids = picked, binding.surface.proxy_vertices_for(picked)
+    else:
+        detail, proxy_ids = None, picked
+    current = np.empty(3 * len(binding.proxy.data.vertices), dtype=np.float32)
+    binding.proxy.data.attributes["position"].data.foreach_get("vector", current)
+    return handles.add(obj, binding.proxy, kind, proxy_ids, binding.surface.proxy_vertices,
+                       current.reshape(-1, 3).astype(np.float64), detail_ids=detail, size=handle_size(obj))
+
+
+def clear(obj):
+    """Remove the proxy, every handle and the stored binding of ``obj``; the mesh keeps its shape."""
+    import bpy
+    for empty in handles.handles_of(obj):
+        handles.remove(empty)
+    _remove_proxy(obj)
+    stored.forget(obj)
+    collection = bpy.data.collections.get(COLLECTION)
+    if collection is not None and not collection.all_objects:
+        bpy.data.collections.remove(collection)
+
+
+def _name(obj):
+    return "nothing" if obj is None else repr(obj.name)
