@@ -1,4 +1,7 @@
+import os
 import pathlib
+import shutil
+import tempfile
 
 import numpy as np
 import pytest
@@ -23,3 +26,27 @@ def bundled():
 
 def diagonal(points):
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def pytest_configure(config):
+    """Blender reads and may write its user resources: point them at a throw-away folder before
+    any test module imports bpy, and remove it when the run ends."""
+    config._skin_detach_blender_user = tempfile.mkdtemp(prefix="skin_detach_blender_user_")
+    os.environ["BLENDER_USER_RESOURCES"] = config._skin_detach_blender_user
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(getattr(config, "_skin_detach_blender_user", ""), ignore_errors=True)
+
+
+@pytest.fixture
+def scene():
+    """Fresh empty scene with the add-on registered (headless bpy)."""
+    bpy = pytest.importorskip("bpy")
+    import skin_detach_addon
+    from skin_detach_addon.blender import live_update
+    if not hasattr(bpy.types.Scene, "skin_detach"):
+        skin_detach_addon.register()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    live_update.flush()
+    return bpy.context.scene

@@ -8,11 +8,17 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from . import binding as stored
 from . import handles, mesh_io
 
+#: Tolerance of the normal-update iteration while the mouse moves (the API default) ...
+DRAG_TOL = 1e-6
+#: ... and when a result is kept (Apply, live update, confirm): tight enough that the result
+#: does not depend on where the warm start came from.
+SETTLE_TOL = 1e-12
 #: Last step per binding id, for the panel (runtime only, never saved).
 LAST_STEP = {}
 
@@ -50,8 +56,8 @@ class Deformation:
             raise SkinDetachError(f"proxy {self.proxy.name!r}: expected {m} vertices, got "
                                   f"{len(self.proxy.data.vertices)} (its mesh was edited); press Rebuild")
 
-    def step(self):
-        """Solve, rebuild and write; returns a :class:`StepReport`."""
+    def step(self, tol=SETTLE_TOL):
+        """Solve (to ``tol``, see :class:`DualLaplacian`), rebuild and write; returns a :class:`StepReport`."""
         start = time.perf_counter()
         rest_proxy = self.binding.surface.proxy_vertices
         ids, targets = handles.constraints(self.obj, self.proxy, rest_proxy)
@@ -59,7 +65,7 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         entry = self.binding.solver(ids, self.preserve_volume)
-        result = entry[0].solve(targets, initial=entry[1])
+        result = entry[0].solve(targets, initial=entry[1], max_iter=100, tol=tol)
         entry[1] = result.vertices
         detail = self.binding.rebuild(result.vertices)
         mesh_io.write_positions(self.obj.data, detail)
@@ -73,7 +79,7 @@ class Deformation:
         """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame."""
         for empty in handles.handles_of(self.obj, self.proxy):
             rest_local = np.asarray(empty[handles.TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
-            empty.matrix_basis = [list(row) for row in rest_local]
+            empty.matrix_basis = Matrix(rest_local.tolist())
         mesh_io.write_positions(self.obj.data, self.binding.rest)
         mesh_io.write_positions(self.proxy.data, self.binding.surface.proxy_vertices)
         stored.mark_written(self.obj, self.binding.rest)

@@ -12,7 +12,7 @@ from mathutils import Matrix, Vector
 
 from . import binding as stored
 from . import mesh_io
-from .deformation import Deformation, remember_handles
+from .deformation import DRAG_TOL, Deformation, remember_handles
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
 _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
@@ -122,11 +122,13 @@ class DragSession:
 
     def _follow(self, mouse):
         self.empty.matrix_world = self.matrix(mouse)
-        self.last = self.deformation.step()
+        self.last = self.deformation.step(tol=DRAG_TOL)
         self.step_ms.append(self.last.milliseconds)
 
     def confirm(self):
+        """Keep the result, settled to the tight tolerance so it does not depend on the path."""
         if self.last is not None:
+            self.last = self.deformation.step()
             stored.mark_written(self.obj, self.last.positions)
         return FINISHED
 

@@ -90,8 +90,11 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
     empty.matrix_basis = Matrix.Translation(rest_centroid.tolist())
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
-    empty[TAG]["proxy_ids"] = np.asarray(proxy_ids, dtype=np.int32)
-    empty[TAG]["rest_local"] = rest_local.ravel()
+    props = empty[TAG]
+    # Assigning over an existing ID-property array keeps its old length: delete it first.
+    for key, value in (("proxy_ids", np.asarray(proxy_ids, dtype=np.int32)), ("rest_local", rest_local.ravel())):
+        del props[key]
+        props[key] = value
 
 
 def local_motion(obj, empty):

@@ -1,0 +1,131 @@
+"""Shared set-up of the headless bpy tests: a fresh empty scene, small bound meshes, a fake view."""
+
+import pathlib
+
+import numpy as np
+from mathutils import Vector
+
+import bpy
+
+from skin_detach_addon.blender import handles, mesh_io
+
+DATA = pathlib.Path(__file__).parent / "data"
+
+
+def activate(obj):
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+
+
+def import_spot():
+    """spot.obj (triangles, UVs) as the active object."""
+    bpy.ops.wm.obj_import(filepath=str(DATA / "spot.obj"))
+    obj = bpy.context.selected_objects[0]
+    activate(obj)
+    return obj
+
+
+def quad_sphere(name="quads", segments=32, rings=16):
+    """UV sphere (quads with triangle fans at the poles, UVs) with a vertex group, two materials
+    and custom attributes on points and faces, as the active object."""
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=segments, ring_count=rings, radius=1.0)
+    obj = bpy.context.active_object
+    obj.name = name
+    mesh = obj.data
+    group = obj.vertex_groups.new(name="weights")
+    for index in range(0, len(mesh.vertices), 3):
+        group.add([index], (index % 7) / 7.0, 'REPLACE')
+    for label in ("red", "blue"):
+        mesh.materials.append(bpy.data.materials.new(label))
+    mesh.polygons.foreach_set("material_index", (np.arange(len(mesh.polygons)) % 2).astype(np.int32))
+    values = np.linspace(0.0, 1.0, len(mesh.vertices), dtype=np.float32)
+    mesh.attributes.new("temperature", 'FLOAT', 'POINT').data.foreach_set("value", values)
+    mesh.attributes.new("region", 'INT', 'FACE').data.foreach_set(
+        "value", (np.arange(len(mesh.polygons)) % 5).astype(np.int32))
+    mesh.update()
+    activate(obj)
+    return obj
+
+
+def select_vertices(obj, mask):
+    obj.data.vertices.foreach_set("select", np.asarray(mask, dtype=bool))
+    obj.data.update()
+
+
+def band(obj, low, high, axis=2):
+    """Mask of the vertices whose ``axis`` coordinate lies in [low, high] of its range (fractions)."""
+    positions = mesh_io.read_positions(obj.data)[:, axis]
+    span = positions.max() - positions.min()
+    return (positions >= positions.min() + low * span) & (positions <= positions.min() + high * span)
+
+
+def rig(obj, target_faces=300, axis=2):
+    """Build ``obj``, add an anchor on its lowest 15 % and a handle on its highest 15 %."""
+    bpy.context.scene.skin_detach.target_faces = target_faces
+    activate(obj)
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    select_vertices(obj, band(obj, 0.0, 0.15, axis))
+    assert bpy.ops.skin_detach.add_anchor() == {'FINISHED'}
+    select_vertices(obj, band(obj, 0.85, 1.0, axis))
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
+    handle = [e for e in handles.handles_of(obj) if e[handles.TAG]["kind"] == handles.HANDLE][0]
+    return handle
+
+
+def all_data(mesh):
+    """Everything but positions that the add-on must leave alone, as arrays."""
+    out = {}
+    corner = np.empty(len(mesh.loops), dtype=np.int32)
+    mesh.attributes[".corner_vert"].data.foreach_get("value", corner)
+    out["corner_vert"] = corner
+    starts = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    out["loop_start"] = starts
+    materials = np.empty(len(mesh.polygons), dtype=np.int32)
+    mesh.polygons.foreach_get("material_index", materials)
+    out["material_index"] = materials
+    for layer in mesh.uv_layers:
+        uv = np.empty(2 * len(mesh.loops), dtype=np.float32)
+        layer.data.foreach_get("uv", uv)
+        out[f"uv:{layer.name}"] = uv
+    for attribute in mesh.attributes:
+        if attribute.name in ("position",) or attribute.name.startswith("."):
+            continue
+        if attribute.data_type in ('FLOAT', 'INT', 'BOOLEAN', 'INT8'):
+            field = "value"
+            width = 1
+        elif attribute.data_type in ('FLOAT_VECTOR',):
+            field, width = "vector", 3
+        elif attribute.data_type == 'FLOAT2':
+            field, width = "vector", 2
+        elif attribute.data_type in ('FLOAT_COLOR', 'BYTE_COLOR'):
+            field, width = "color", 4
+        else:
+            continue
+        values = np.empty(width * len(attribute.data), dtype=np.float64)
+        attribute.data.foreach_get(field, values)
+        out[f"attr:{attribute.name}"] = values
+    out["materials"] = np.array([m.name for m in mesh.materials])
+    return out
+
+
+def vertex_group_weights(obj):
+    mesh = obj.data
+    return [[(g.group, g.weight) for g in v.groups] for v in mesh.vertices]
+
+
+class TopView:
+    """Orthographic top view: one pixel is ``scale`` world units, looking down -Z."""
+
+    direction = Vector((0.0, 0.0, -1.0))
+
+    def __init__(self, scale=0.01):
+        self.scale = scale
+
+    def to_world(self, mouse, depth_point):
+        return Vector((mouse[0] * self.scale, mouse[1] * self.scale, depth_point[2]))
+
+    def to_screen(self, point):
+        return Vector((point[0] / self.scale, point[1] / self.scale))

@@ -1,0 +1,120 @@
+"""Headless bpy: the drag session under fake mouse events, live update, registration."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import TopView, activate, band, import_spot, rig  # noqa: E402
+
+import skin_detach_addon  # noqa: E402
+from skin_detach_addon.blender import binding, live_update, mesh_io  # noqa: E402
+from skin_detach_addon.blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession  # noqa: E402
+
+
+def _state(obj):
+    proxy = binding.proxy_of(obj)
+    return (mesh_io.snapshot(obj.data)[0], mesh_io.snapshot(proxy.data)[0],
+            [np.array(child.matrix_basis) for child in proxy.children], obj[binding.KEY]["written_digest"])
+
+
+def _same(a, b):
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert all(np.array_equal(x, y) for x, y in zip(a[2], b[2]))
+    assert a[3] == b[3]
+
+
+def test_drag_moves_in_the_view_plane_and_cancel_restores_bit_exact(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    before = _state(obj)
+    rest = mesh_io.read_positions(obj.data)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100))
+    start = np.array(handle.matrix_world)
+    assert session.event("MOUSEMOVE", "NOTHING", (120, 90)) == RUNNING
+    moved = np.array(handle.matrix_world)
+    assert np.allclose(moved[:3, 3] - start[:3, 3], (0.2, -0.1, 0.0), atol=1e-6)
+    assert np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.05
+    assert "ms/step" in session.header
+    assert session.event("ESC", "PRESS", (120, 90)) == CANCELLED
+    _same(_state(obj), before)
+
+
+def test_drag_axis_and_rotate_keys_then_confirm(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    rest = mesh_io.read_positions(obj.data)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    start = np.array(handle.matrix_world)
+    session.event("X", "PRESS", (0, 0))
+    session.event("MOUSEMOVE", "NOTHING", (30, 50))
+    moved = np.array(handle.matrix_world)
+    assert np.allclose(moved[:3, 3] - start[:3, 3], (0.3, 0.0, 0.0), atol=1e-6)
+    session.event("X", "PRESS", (30, 50))           # free again, the 0.3 along X is kept
+    session.event("R", "PRESS", (30, 50))           # rotate about the view axis (world Z here)
+    centre = np.array(session.view.to_screen(handle.matrix_world.to_translation()))
+    radius = np.array((30, 50)) - centre
+    quarter = centre + np.array((-radius[1], radius[0]))
+    session.event("MOUSEMOVE", "NOTHING", tuple(quarter))
+    turned = np.array(handle.matrix_world)
+    assert np.allclose(turned[:3, :3], np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]]) @ start[:3, :3], atol=1e-5)
+    assert np.allclose(turned[:3, 3], moved[:3, 3], atol=1e-5)
+    assert session.event("RET", "PRESS", tuple(quarter)) == FINISHED
+    result = mesh_io.read_positions(obj.data)
+    assert np.abs(result - rest).max() > 0.1
+    assert binding.open_binding(obj) is not None
+    binding.check_unedited(obj)  # the confirmed shape is what Skin Detach wrote
+
+
+def test_drag_operator_scripted_path_moves_the_active_handle(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    rest = mesh_io.read_positions(obj.data)
+    top = band(obj, 0.85, 1.0, axis=1)
+    activate(handle)
+    assert bpy.ops.skin_detach.drag(offset=(0.0, 0.0, 0.25)) == {'FINISHED'}
+    world = np.array(obj.matrix_world)
+    local = np.linalg.solve(world[:3, :3], np.array((0.0, 0.0, 0.25)))
+    assert np.allclose(mesh_io.read_positions(obj.data)[top] - rest[top], local, atol=1e-5)
+
+
+def test_live_update_follows_moves_and_frame_changes(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    rest = mesh_io.read_positions(obj.data)
+    handle.location.x += 0.2
+    bpy.context.view_layer.update()
+    assert live_update.pending() == set()          # off: nothing is watched
+    scene.skin_detach.live_update = True
+    bpy.context.view_layer.update()
+    assert live_update.pending() == {obj.name}
+    live_update.flush()                             # what the timer runs
+    first = mesh_io.read_positions(obj.data)
+    assert np.abs(first - rest).max() > 0.1
+    bpy.context.view_layer.update()                 # its own write does not queue another solve
+    assert live_update.pending() == set()
+
+    handle.keyframe_insert("location", frame=1)
+    handle.location.x += 0.2
+    handle.keyframe_insert("location", frame=10)
+    live_update.flush()
+    scene.frame_set(10)
+    assert live_update.pending() == {obj.name}
+    live_update.flush()
+    assert np.abs(mesh_io.read_positions(obj.data) - first).max() > 0.1
+    scene.frame_set(1)
+    live_update.flush()
+    assert np.abs(mesh_io.read_positions(obj.data) - first).max() <= 5e-5
+
+
+def test_unregister_leaves_nothing_behind(scene):
+    scene.skin_detach.live_update = True
+    skin_detach_addon.unregister()
+    try:
+        names = [f.__name__ for f in bpy.app.handlers.depsgraph_update_post + bpy.app.handlers.frame_change_post]
+        assert not any(name.startswith("_on_") for name in names)
+        assert not hasattr(bpy.types.Scene, "skin_detach")
+        assert not hasattr(bpy.types, "SKIN_DETACH_OT_build") and not hasattr(bpy.types, "VIEW3D_PT_skin_detach")
+        assert not bpy.app.timers.is_registered(live_update.flush)
+    finally:
+        skin_detach_addon.register()

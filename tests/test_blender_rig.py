@@ -1,0 +1,209 @@
+"""Headless bpy: build, handles, apply, reset, clear, persistence and refusals."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import activate, band, import_spot, rig, select_vertices  # noqa: E402
+
+from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
+
+
+def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(scene):
+    obj = import_spot()
+    scene.skin_detach.target_faces = 400
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    proxy = binding.proxy_of(obj)
+    assert proxy.name == "spot_proxy" and proxy.parent == obj
+    assert proxy.display_type == 'WIRE' and proxy.hide_render
+    assert [c.name for c in proxy.users_collection] == [skin_rig.COLLECTION]
+    assert np.allclose(np.array(proxy.matrix_world), np.array(obj.matrix_world))
+    assert 300 <= len(proxy.data.polygons) <= 400
+    stats = binding.stats_of(obj)
+    assert stats["detail_vertices"] == len(obj.data.vertices)
+
+    select_vertices(obj, band(obj, 0.8, 1.0, axis=1))
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
+    activate(proxy)
+    proxy.data.vertices.foreach_set("select", np.arange(len(proxy.data.vertices)) < 5)
+    assert bpy.ops.skin_detach.add_anchor() == {'FINISHED'}
+    activate(obj)
+    scene.skin_detach.target_faces = 200
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    proxies = [o for o in bpy.data.objects if skin_rig.PROXY_TAG in o]
+    assert len(proxies) == 1 and len(proxies[0].data.polygons) < 300  # the normal test may stop above 200
+    assert len(bpy.data.meshes) == 2
+    kept = handles.handles_of(obj)
+    # The handle made from detail vertices follows to the new proxy; the proxy-made anchor cannot.
+    assert [e[handles.TAG]["kind"] for e in kept] == [handles.HANDLE]
+    assert kept[0].parent == proxies[0]
+    assert np.asarray(kept[0][handles.TAG]["proxy_ids"]).max() < len(proxies[0].data.vertices)
+
+
+def test_binding_is_stored_without_int64_or_pickles(scene):
+    obj = import_spot()
+    rig(obj, axis=1)
+    props = obj[binding.KEY]
+    for key, value in props.items():
+        if hasattr(value, "typecode"):
+            assert value.typecode in "ifd", key
+        else:
+            assert isinstance(value, (int, str, float)) or key in ("proxy", "settings"), key
+
+
+def test_add_handle_leaves_edit_mode_and_uses_the_edit_selection(scene):
+    obj = import_spot()
+    rig(obj, axis=1)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.select_all(action='DESELECT')
+    bpy.ops.object.mode_set(mode='OBJECT')
+    picked = np.zeros(len(obj.data.vertices), dtype=bool)
+    picked[:20] = True
+    select_vertices(obj, picked)
+    bpy.ops.object.mode_set(mode='EDIT')
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
+    assert obj.mode == 'OBJECT'
+    empty = handles.handles_of(obj)[-1]
+    assert np.array_equal(np.asarray(empty[handles.TAG]["detail_ids"]), np.arange(20))
+
+
+def test_apply_moves_the_handle_rigidly_keeps_anchors_and_reset_is_exact(scene):
+    obj = import_spot()
+    rest = mesh_io.read_positions(obj.data)
+    handle = rig(obj, axis=1)
+    top, bottom = band(obj, 0.85, 1.0, axis=1), band(obj, 0.0, 0.15, axis=1)
+    handle.location = handle.location + type(handle.location)((0.2, 0.05, -0.1))
+    assert bpy.ops.skin_detach.apply() == {'FINISHED'}
+    moved = mesh_io.read_positions(obj.data)
+    assert np.allclose(moved[top] - rest[top], (0.2, 0.05, -0.1), atol=1e-5)
+    assert np.abs(moved[bottom] - rest[bottom]).max() <= 1e-5
+    assert np.abs(moved - rest).max() > 0.1
+    # The proxy shows the deformed proxy.
+    assert not np.array_equal(mesh_io.read_positions(binding.proxy_of(obj).data),
+                              binding.open_binding(obj).surface.proxy_vertices.astype(np.float32))
+    assert bpy.ops.skin_detach.reset() == {'FINISHED'}
+    assert np.array_equal(mesh_io.read_positions(obj.data), rest)
+    assert np.allclose(np.array(handle.matrix_basis)[:3, 3],
+                       np.asarray(handle[handles.TAG]["rest_local"]).reshape(4, 4)[:3, 3])
+
+
+def test_thousands_of_applies_do_not_drift(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    start = handle.location.copy()
+    handle.location.x += 0.1
+    bpy.ops.skin_detach.apply()
+    first = mesh_io.read_positions(obj.data)
+    for k in range(200):
+        handle.location.x = start.x + 0.1 + 0.05 * np.sin(k)
+        bpy.ops.skin_detach.apply()
+    handle.location.x = start.x + 0.1
+    bpy.ops.skin_detach.apply()
+    assert np.abs(mesh_io.read_positions(obj.data) - first).max() <= 1e-5
+
+
+def test_clear_removes_proxy_handles_binding_and_collection(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    handle.location.x += 0.2
+    bpy.ops.skin_detach.apply()
+    shape = mesh_io.read_positions(obj.data)
+    assert bpy.ops.skin_detach.clear() == {'FINISHED'}
+    assert binding.KEY not in obj
+    assert [o.name for o in bpy.data.objects] == [obj.name]
+    assert skin_rig.COLLECTION not in bpy.data.collections
+    assert np.array_equal(mesh_io.read_positions(obj.data), shape)
+
+
+def test_save_reload_then_apply_without_rebuilding(scene, tmp_path):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    handle.location.x += 0.15
+    bpy.ops.skin_detach.apply()
+    expected = mesh_io.read_positions(obj.data)
+    bpy.ops.skin_detach.reset()
+    path = tmp_path / "bound.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    binding._CACHE.clear()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects["spot"]
+    handle = [e for e in handles.handles_of(obj) if e[handles.TAG]["kind"] == handles.HANDLE][0]
+    activate(handle)
+    handle.location.x += 0.15
+    assert bpy.ops.skin_detach.apply() == {'FINISHED'}
+    assert np.abs(mesh_io.read_positions(obj.data) - expected).max() <= 1e-5
+
+
+def _refused(operator, match):
+    with pytest.raises(RuntimeError, match=match):
+        operator()
+
+
+def test_bad_input_is_reported_and_changes_nothing(scene):
+    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    scene.collection.objects.link(camera)
+    activate(camera)
+    assert not bpy.ops.skin_detach.build.poll()
+
+    empty_mesh = bpy.data.objects.new("empty_mesh", bpy.data.meshes.new("empty_mesh"))
+    scene.collection.objects.link(empty_mesh)
+    activate(empty_mesh)
+    _refused(bpy.ops.skin_detach.build, "expected vertices and faces")
+    assert binding.KEY not in empty_mesh
+
+    obj = import_spot()
+    positions = mesh_io.read_positions(obj.data)
+    broken = positions.copy()
+    broken[7] = np.nan
+    obj.data.attributes["position"].data.foreach_set("vector", broken.ravel())
+    _refused(bpy.ops.skin_detach.build, "NaN")
+    assert binding.KEY not in obj and len(bpy.data.objects) == 3
+
+
+def test_no_handles_is_refused(scene):
+    obj = import_spot()
+    scene.skin_detach.target_faces = 300
+    bpy.ops.skin_detach.build()
+    rest = mesh_io.read_positions(obj.data)
+    _refused(bpy.ops.skin_detach.apply, "at least one handle")
+    assert np.array_equal(mesh_io.read_positions(obj.data), rest)
+
+
+def test_edited_mesh_and_deleted_proxy_are_refused_and_nothing_is_written(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    handle.location.x += 0.1
+    # Positions edited outside Skin Detach (as a sculpt stroke would).
+    edited = mesh_io.read_positions(obj.data)
+    edited[0] += 0.01
+    obj.data.attributes["position"].data.foreach_set("vector", edited.ravel())
+    _refused(bpy.ops.skin_detach.apply, "edited since")
+    assert np.array_equal(mesh_io.read_positions(obj.data), edited)
+
+    # Topology edited after binding.
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.select_all(action='DESELECT')
+    bpy.ops.object.mode_set(mode='OBJECT')
+    select_vertices(obj, np.arange(len(obj.data.vertices)) == 3)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.delete(type='VERT')
+    bpy.ops.object.mode_set(mode='OBJECT')
+    before = mesh_io.read_positions(obj.data)
+    activate(obj)
+    _refused(bpy.ops.skin_detach.apply, "edited after binding")
+    assert np.array_equal(mesh_io.read_positions(obj.data), before)
+
+
+def test_deleted_proxy_is_refused(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    handle.location.x += 0.1
+    rest = mesh_io.read_positions(obj.data)
+    proxy = binding.proxy_of(obj)
+    activate(proxy)
+    bpy.ops.object.delete()
+    activate(obj)
+    _refused(bpy.ops.skin_detach.apply, "proxy object, it was deleted")
+    assert np.array_equal(mesh_io.read_positions(obj.data), rest)
