@@ -20,6 +20,7 @@ test: $(VENV)/.installed
 bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_core.py
 	$(PY) scripts/benchmark_deform.py
+	$(PY) scripts/benchmark_blender.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -55,6 +55,8 @@ def test_binding_is_stored_without_int64_or_pickles(scene):
 def test_add_handle_leaves_edit_mode_and_uses_the_edit_selection(scene):
     obj = import_spot()
     rig(obj, axis=1)
+    assert handles.is_handle(bpy.context.active_object)  # a new handle is active, ready to drag
+    activate(obj)
     bpy.ops.object.mode_set(mode='EDIT')
     bpy.ops.mesh.select_all(action='DESELECT')
     bpy.ops.object.mode_set(mode='OBJECT')
@@ -183,6 +185,7 @@ def test_edited_mesh_and_deleted_proxy_are_refused_and_nothing_is_written(scene)
     assert np.array_equal(mesh_io.read_positions(obj.data), edited)
 
     # Topology edited after binding.
+    activate(obj)
     bpy.ops.object.mode_set(mode='EDIT')
     bpy.ops.mesh.select_all(action='DESELECT')
     bpy.ops.object.mode_set(mode='OBJECT')

@@ -77,6 +77,8 @@ def store(obj, surface, rest, proxy, settings):
     for key, value in surface.to_arrays().items():
         if value.dtype.kind in "US":
             props[key] = str(value)
+        elif value.ndim == 0:
+            props[key] = value.item()
         elif value.dtype.kind in "iu":
             props[key] = value.astype(np.int32).ravel()
         else:

@@ -79,6 +79,10 @@ class _AddOperator(_Operator):
 
     def run(self, context):
         empty = skin_rig.add_from_selection(context, self.kind)
+        for obj in context.selected_objects:
+            obj.select_set(False)
+        empty.select_set(True)
+        context.view_layer.objects.active = empty  # ready to drag
         ids = len(empty[handles.TAG]["proxy_ids"])
         self.report({'INFO'}, f"Skin Detach: {empty.name} holds {ids} proxy vertices")
         return {'FINISHED'}

@@ -134,6 +134,8 @@ def add_from_selection(context, kind):
     if obj.mode == 'EDIT':
         raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode")
     binding = stored.open_binding(obj)
+    if active.type != 'MESH':  # a handle is active: take the selection of the mesh itself
+        active = obj
     selected = np.zeros(len(active.data.vertices), dtype=bool)
     active.data.vertices.foreach_get("select", selected)
     picked = np.flatnonzero(selected)
