@@ -116,7 +116,9 @@ def blender_stack(obj, target, steps):
     hooked = proxy.vertex_groups.new(name="hooked")
     hooked.add(np.flatnonzero(handle_mask).tolist(), 1.0, 'REPLACE')
     decimate = proxy.modifiers.new("decimate", 'DECIMATE')
-    decimate.ratio = target / len(obj.data.polygons)
+    triangles = np.empty(len(obj.data.polygons), dtype=np.int32)
+    obj.data.polygons.foreach_get("loop_total", triangles)
+    decimate.ratio = target / float((triangles - 2).sum())  # Decimate counts triangles
     activate(proxy)
     bpy.ops.object.modifier_apply(modifier=decimate.name)
     decimate_s = time.perf_counter() - start

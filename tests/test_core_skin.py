@@ -25,7 +25,9 @@ def noisy_box(seed=0):
 
 def test_core_never_imports_bpy():
     code = ("import sys; sys.modules['bpy'] = None; sys.modules['mathutils'] = None; sys.modules['bmesh'] = None\n"
-            "import skin_detach_addon.core, skin_detach_addon.core.obj_io\n"
+            "import importlib, pkgutil, skin_detach_addon.core\n"
+            "for info in pkgutil.iter_modules(skin_detach_addon.core.__path__):\n"
+            "    importlib.import_module('skin_detach_addon.core.' + info.name)\n"
             "assert not any(m in sys.modules and sys.modules[m] is not None for m in ('bpy', 'mathutils', 'bmesh'))")
     subprocess.run([sys.executable, "-c", code], check=True)
 
@@ -281,3 +283,15 @@ def test_normal_test_reduces_disagreement(bundled):
     assert on["normal_disagree_ring"] < 0.8 * off["normal_disagree_ring"]
     assert on["normal_test_refused"] > 0 and off["normal_test_refused"] == 0
     assert on["normal_disagree_bound"] <= off["normal_disagree_ring"]
+
+
+def test_float32_rebuild_matches_float64_and_bad_out_is_refused(bundled):
+    points, tris = bundled("spot")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    moved = sds.proxy_vertices * 1.3 + 0.2
+    wide = sds.reconstruct(moved)
+    narrow = sds.reconstruct(moved, out=np.empty(points.shape, dtype=np.float32))
+    assert narrow.dtype == np.float32
+    assert np.abs(narrow - wide).max() <= 1e-6 * diagonal(points)
+    with pytest.raises(SkinDetachError, match="out: expected"):
+        sds.reconstruct(moved, out=np.empty((3, 3)))

@@ -37,7 +37,7 @@ class Binding:
         self.rest = rest
         self.proxy = proxy
         self._solvers = {}
-        self._buffer = np.empty((surface.n_detail, 3))
+        self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
 
     def solver(self, ids, preserve_volume):
         """:class:`DualLaplacian` for the constrained proxy ids (c,), factored once per set;
@@ -55,7 +55,8 @@ class Binding:
             entry[1] = None
 
     def rebuild(self, proxy_vertices):
-        """(n, 3) detail positions from deformed proxy vertices (m, 3), in a reused buffer."""
+        """(n, 3) float32 detail positions from deformed proxy vertices (m, 3), in a reused buffer
+        (copy it to keep it past the next call)."""
         return self.surface.reconstruct(proxy_vertices, out=self._buffer)
 
 

@@ -29,7 +29,7 @@ class StepReport:
     iterations: int
     converged: bool
     volume_change: float
-    positions: np.ndarray
+    positions: np.ndarray  # (n, 3) float32 as written; a buffer the next step reuses
 
 
 def handle_signature(obj, proxy):

@@ -139,8 +139,13 @@ class SkinDetachedSurface:
         return surface
 
     def reconstruct(self, proxy_vertices, out=None):
-        """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3)."""
+        """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
+        given: an (n, 3) float64 or float32 array (float32 computes in float32)."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
+        if out is not None and (not isinstance(out, np.ndarray) or out.shape != (self.n_detail, 3)
+                                or out.dtype not in (np.float32, np.float64)):
+            raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
+                                  f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
         return self._rebuild(points, out=out)
 
     def proxy_vertices_for(self, ids):
