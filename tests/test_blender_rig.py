@@ -173,7 +173,7 @@ def test_no_handles_is_refused(scene):
     assert np.array_equal(mesh_io.read_positions(obj.data), rest)
 
 
-def test_edited_mesh_and_deleted_proxy_are_refused_and_nothing_is_written(scene):
+def test_edited_positions_or_topology_are_refused_and_nothing_is_written(scene):
     obj = import_spot()
     handle = rig(obj, axis=1)
     handle.location.x += 0.1

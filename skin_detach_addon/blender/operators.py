@@ -26,6 +26,14 @@ class _Operator:
             return {'CANCELLED'}
 
 
+class _BoundOperator(_Operator):
+    """Available when the active object is a bound mesh, its proxy or one of its handles."""
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+
 class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
     """Bind the active mesh to a small proxy (replacing any earlier binding)"""
     bl_idname = "skin_detach.build"
@@ -69,13 +77,9 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
         return {'FINISHED'}
 
 
-class _AddOperator(_Operator):
+class _AddOperator(_BoundOperator):
     kind = handles.HANDLE
     bl_options = {'REGISTER', 'UNDO'}
-
-    @classmethod
-    def poll(cls, context):
-        return bound_owner(context) is not None
 
     def run(self, context):
         empty = skin_rig.add_from_selection(context, self.kind)
@@ -114,16 +118,12 @@ def _named_handle(context, name):
                           f"{context.active_object.name if context.active_object else 'nothing'!r}")
 
 
-class SKIN_DETACH_OT_remove_handle(_Operator, bpy.types.Operator):
+class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
     """Remove a handle or anchor (the active one, or the one named)"""
     bl_idname = "skin_detach.remove_handle"
     bl_label = "Remove Handle"
     bl_options = {'REGISTER', 'UNDO'}
     name: bpy.props.StringProperty(name="Handle", default="")
-
-    @classmethod
-    def poll(cls, context):
-        return bound_owner(context) is not None
 
     def run(self, context):
         empty = _named_handle(context, self.name)
@@ -159,15 +159,11 @@ def _solve(context, obj):
     return report
 
 
-class SKIN_DETACH_OT_apply(_Operator, bpy.types.Operator):
+class SKIN_DETACH_OT_apply(_BoundOperator, bpy.types.Operator):
     """Deform the mesh from the current transforms of all its handles"""
     bl_idname = "skin_detach.apply"
     bl_label = "Apply Handles"
     bl_options = {'REGISTER', 'UNDO'}
-
-    @classmethod
-    def poll(cls, context):
-        return bound_owner(context) is not None
 
     def run(self, context):
         report = _solve(context, bound_owner(context))
@@ -229,15 +225,11 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         return {'RUNNING_MODAL'}
 
 
-class SKIN_DETACH_OT_reset(_Operator, bpy.types.Operator):
+class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
     """Put the mesh, proxy and handles back to the rest shape (the binding stays)"""
     bl_idname = "skin_detach.reset"
     bl_label = "Reset to Rest"
     bl_options = {'REGISTER', 'UNDO'}
-
-    @classmethod
-    def poll(cls, context):
-        return bound_owner(context) is not None
 
     def run(self, context):
         Deformation(bound_owner(context)).reset()
@@ -245,16 +237,11 @@ class SKIN_DETACH_OT_reset(_Operator, bpy.types.Operator):
         return {'FINISHED'}
 
 
-class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
+class SKIN_DETACH_OT_clear(_BoundOperator, bpy.types.Operator):
     """Remove the proxy, the handles and the binding (the mesh keeps its current shape)"""
     bl_idname = "skin_detach.clear"
     bl_label = "Clear Skin"
     bl_options = {'REGISTER', 'UNDO'}
-
-    @classmethod
-    def poll(cls, context):
-        obj = skin_rig.owner_of(context.active_object)
-        return obj is not None and stored.has_binding(obj)
 
     def run(self, context):
         obj = bound_owner(context)
