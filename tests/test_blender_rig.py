@@ -210,3 +210,55 @@ def test_deleted_proxy_is_refused(scene):
     activate(obj)
     _refused(bpy.ops.skin_detach.apply, "proxy object, it was deleted")
     assert np.array_equal(mesh_io.read_positions(obj.data), rest)
+
+
+class _Layout:
+    """Stands in for a UI layout: records what a panel draws."""
+
+    def __init__(self, lines):
+        self.lines = lines
+
+    def box(self):
+        return self
+
+    def row(self, align=False):
+        return self
+
+    def label(self, text="", icon='NONE'):
+        self.lines.append(("label", text))
+
+    def prop(self, data, name, **options):
+        assert hasattr(data, name), name
+        self.lines.append(("prop", name))
+
+    def operator(self, idname, text="", icon='NONE', depress=False):
+        group, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, group), name), idname
+        self.lines.append(("operator", idname))
+        return type("Properties", (), {})()
+
+
+def _draw_panel():
+    from skin_detach_addon.blender.panel import VIEW3D_PT_skin_detach
+    lines = []
+    VIEW3D_PT_skin_detach.draw(type("Panel", (), {"layout": _Layout(lines)})(), bpy.context)
+    return lines
+
+
+def test_panel_draws_build_handles_deform_and_figures(scene):
+    obj = import_spot()
+    assert ("label", "spot: not bound") in _draw_panel()
+    handle = rig(obj, axis=1)
+    activate(obj)
+    lines = _draw_panel()
+    operators = [value for kind, value in lines if kind == "operator"]
+    for idname in ("skin_detach.build", "skin_detach.add_handle", "skin_detach.add_anchor", "skin_detach.drag",
+                   "skin_detach.apply", "skin_detach.reset", "skin_detach.clear"):
+        assert idname in operators
+    assert operators.count("skin_detach.select_handle") == 2 and operators.count("skin_detach.remove_handle") == 2
+    assert ("prop", "live_update") in lines and ("prop", "target_faces") in lines
+    assert any(kind == "label" and value.startswith("Detail: 2,930 vertices") for kind, value in lines)
+    assert ("label", "Last step: -") in lines
+    activate(handle)
+    bpy.ops.skin_detach.apply()
+    assert any(kind == "label" and value.startswith("Last step: ") and value.endswith(" ms") for kind, value in _draw_panel())
