@@ -149,10 +149,6 @@ def mark_written(obj, positions):
     obj[KEY]["written_digest"] = mesh_io.positions_digest(positions)
 
 
-def settings_of(obj):
-    return obj[KEY]["settings"].to_dict() if has_binding(obj) else {}
-
-
 def stats_of(obj):
     """The core build figures stored with the binding (dict), or {}."""
     return json.loads(obj[KEY]["stats"]) if has_binding(obj) and "stats" in obj[KEY] else {}
