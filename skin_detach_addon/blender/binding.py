@@ -39,16 +39,20 @@ class Binding:
         self._solvers = {}
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
 
-    def solver(self, ids, preserve_volume):
-        """:class:`DualLaplacian` for the constrained proxy ids (c,), factored once per set;
-        the previous solution of the same set is kept for warm starts."""
+    def solve_proxy(self, ids, targets, preserve_volume, tol):
+        """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
+        One :class:`DualLaplacian` is factored per set of ids (the last few are kept), and each
+        solve is warm-started from the previous solution of the same set."""
         key = (ids.tobytes(), bool(preserve_volume))
         if key not in self._solvers:
             if len(self._solvers) >= 8:
                 self._solvers.pop(next(iter(self._solvers)))
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume), None]
-        return self._solvers[key]
+        entry = self._solvers[key]
+        result = entry[0].solve(targets, initial=entry[1], max_iter=100, tol=tol)
+        entry[1] = result.vertices
+        return result
 
     def forget_warm_starts(self):
         for entry in self._solvers.values():
@@ -64,7 +68,7 @@ def has_binding(obj):
     return obj is not None and obj.type == 'MESH' and KEY in obj
 
 
-def store(obj, surface, rest, proxy, settings):
+def store(obj, surface, rest, proxy):
     """Write the binding of ``obj`` (replacing any) and return its :class:`Binding`."""
     props = {
         "schema_version": SCHEMA_VERSION,
@@ -73,7 +77,6 @@ def store(obj, surface, rest, proxy, settings):
         "written_digest": mesh_io.positions_digest(rest),
         "proxy": proxy,
         "rest": np.ascontiguousarray(rest, dtype=np.float32).ravel(),
-        "settings": dict(settings),
     }
     for key, value in surface.to_arrays().items():
         if value.dtype.kind in "US":
@@ -116,7 +119,7 @@ def open_binding(obj):
     binding = _CACHE.get(props["binding_id"])
     if binding is None:
         arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
-                  for key, value in props.items() if key not in ("proxy", "settings")}
+                  for key, value in props.items() if key != "proxy"}
         surface = SkinDetachedSurface.from_arrays(arrays, source=f"binding of {obj.name!r}")
         binding = Binding(props["binding_id"], surface, np.asarray(props["rest"], dtype=np.float32).reshape(-1, 3),
                           proxy)

@@ -32,12 +32,13 @@ class StepReport:
     positions: np.ndarray  # (n, 3) float32 as written; a buffer the next step reuses
 
 
-def handle_signature(obj, proxy):
+def handle_signature(obj, proxy, empties=None):
     """Tuple of the object's world matrix, the proxy's and every handle's own (basis) matrix:
-    changes when any of them moves, by any means, and is current as soon as it is set."""
+    changes when any of them moves, by any means, and is current as soon as it is set.
+    ``empties``: the handles of ``obj`` when the caller has them already."""
     values = [tuple(v for col in obj.matrix_world.col for v in col),
               tuple(v for col in proxy.matrix_basis.col for v in col)]
-    for empty in handles.handles_of(obj, proxy):
+    for empty in handles.handles_of(obj, proxy) if empties is None else empties:
         values.append((empty.name,) + tuple(v for col in empty.matrix_basis.col for v in col))
     return tuple(values)
 
@@ -59,20 +60,18 @@ class Deformation:
     def step(self, tol=SETTLE_TOL):
         """Solve (to ``tol``, see :class:`DualLaplacian`), rebuild and write; returns a :class:`StepReport`."""
         start = time.perf_counter()
-        rest_proxy = self.binding.surface.proxy_vertices
-        ids, targets = handles.constraints(self.obj, self.proxy, rest_proxy)
+        empties = handles.handles_of(self.obj, self.proxy)
+        ids, targets = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        entry = self.binding.solver(ids, self.preserve_volume)
-        result = entry[0].solve(targets, initial=entry[1], max_iter=100, tol=tol)
-        entry[1] = result.vertices
+        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
         detail = self.binding.rebuild(result.vertices)
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, result.vertices)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
-        LAST_STEP[self.binding.binding_id] = (report.milliseconds, handle_signature(self.obj, self.proxy))
+        LAST_STEP[self.binding.binding_id] = (report.milliseconds, handle_signature(self.obj, self.proxy, empties))
         return report
 
     def reset(self):

@@ -104,10 +104,10 @@ def local_motion(obj, empty):
     return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ np.linalg.inv(rest_local)
 
 
-def constraints(obj, proxy, rest_proxy):
-    """Constrained proxy ids (c,) sorted, and their targets (c, 3) in local space, from every
-    handle and anchor of ``obj``. Handles override anchors; a later handle overrides an earlier."""
-    empties = handles_of(obj, proxy)
+def constraints(obj, empties, rest_proxy):
+    """Constrained proxy ids (c,) sorted, and their targets (c, 3) in local space, from the
+    handle and anchor ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a
+    later handle overrides an earlier."""
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)

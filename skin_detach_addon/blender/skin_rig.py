@@ -54,8 +54,7 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     old = handles.handles_of(obj)
     _remove_proxy(obj)
     proxy = _make_proxy(obj, surface)
-    stored.store(obj, surface, positions, proxy,
-                 {"target_faces": int(target_faces), "normal_test": bool(normal_test)})
+    stored.store(obj, surface, positions, proxy)
     kept = removed = 0
     for empty in old:
         detail = np.asarray(empty[handles.TAG]["detail_ids"], dtype=np.int64)
