@@ -57,16 +57,22 @@ class Deformation:
             raise SkinDetachError(f"proxy {self.proxy.name!r}: expected {m} vertices, got "
                                   f"{len(self.proxy.data.vertices)} (its mesh was edited); press Rebuild")
 
-    def step(self, tol=SETTLE_TOL):
-        """Solve (to ``tol``, see :class:`DualLaplacian`), rebuild and write; returns a :class:`StepReport`."""
-        start = time.perf_counter()
+    def solve(self, tol=SETTLE_TOL):
+        """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
+        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)), the (n, 3) float32 detail
+        positions (a buffer the next call reuses) and the handle empties it read."""
         empties = handles.handles_of(self.obj, self.proxy)
         ids, targets = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
-        detail = self.binding.rebuild(result.vertices)
+        return result, self.binding.rebuild(result.vertices), empties
+
+    def step(self, tol=SETTLE_TOL):
+        """:meth:`solve`, then write the mesh and the proxy; returns a :class:`StepReport`."""
+        start = time.perf_counter()
+        result, detail, empties = self.solve(tol)
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, result.vertices)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,

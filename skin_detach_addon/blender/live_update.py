@@ -10,9 +10,10 @@ stops the write's own depsgraph update from scheduling another. Only scenes whos
 import bpy
 from bpy.app.handlers import persistent
 
+from .. import api
 from ..core.errors import SkinDetachError
 from . import binding as stored
-from .deformation import Deformation, handle_signature, remember_handles, solved_signature
+from .deformation import handle_signature, remember_handles, solved_signature
 
 _pending = set()
 _state = {"busy": False}
@@ -56,10 +57,7 @@ def flush():
             if obj is None or not stored.has_binding(obj):
                 continue
             try:
-                deformation = Deformation(obj, scene.skin_detach.preserve_volume)
-                stored.check_unedited(obj)
-                report = deformation.step()
-                stored.mark_written(obj, report.positions)
+                api.deform(obj, scene.skin_detach.preserve_volume)
                 ERRORS.pop(name, None)
             except SkinDetachError as exc:
                 ERRORS[name] = str(exc)

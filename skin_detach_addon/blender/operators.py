@@ -4,10 +4,10 @@
 import bpy
 from mathutils import Vector
 
+from .. import api
 from ..core.errors import SkinDetachError
 from . import binding as stored
 from . import handles, skin_rig
-from .deformation import Deformation
 from .drag_session import CANCELLED, FINISHED, DragSession, RegionView
 
 
@@ -63,7 +63,7 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
         wm.progress_begin(0, 100)
         try:
-            stats = skin_rig.build(obj, settings.target_faces, settings.normal_test, progress)
+            stats = api.build(obj, settings.target_faces, settings.normal_test, progress)
         finally:
             wm.progress_end()
             if status is not None:
@@ -82,7 +82,9 @@ class _AddOperator(_BoundOperator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        empty = skin_rig.add_from_selection(context, self.kind)
+        obj, ids, on_proxy = skin_rig.selection(context)
+        add = api.add_handle if self.kind == handles.HANDLE else api.add_anchor
+        empty = add(obj, ids, on_proxy=on_proxy)
         for obj in context.selected_objects:
             obj.select_set(False)
         empty.select_set(True)
@@ -149,16 +151,6 @@ class SKIN_DETACH_OT_select_handle(_Operator, bpy.types.Operator):
         return {'FINISHED'}
 
 
-def _solve(context, obj):
-    """One checked solve from the current handle transforms, written back; returns its report."""
-    context.view_layer.update()
-    deformation = Deformation(obj, context.scene.skin_detach.preserve_volume)
-    stored.check_unedited(obj)
-    report = deformation.step()
-    stored.mark_written(obj, report.positions)
-    return report
-
-
 class SKIN_DETACH_OT_apply(_BoundOperator, bpy.types.Operator):
     """Deform the mesh from the current transforms of all its handles"""
     bl_idname = "skin_detach.apply"
@@ -166,8 +158,8 @@ class SKIN_DETACH_OT_apply(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        report = _solve(context, bound_owner(context))
-        self.report({'INFO'}, f"Skin Detach: solved in {report.milliseconds:.1f} ms ({report.iterations} iterations)")
+        stats = api.deform(bound_owner(context), context.scene.skin_detach.preserve_volume)
+        self.report({'INFO'}, f"Skin Detach: solved in {stats['milliseconds']:.1f} ms ({stats['iterations']} iterations)")
         return {'FINISHED'}
 
 
@@ -190,7 +182,7 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         world = empty.matrix_world.copy()
         world.translation += Vector(self.offset)
         empty.matrix_world = world
-        _solve(context, bound_owner(context))
+        api.deform(bound_owner(context), context.scene.skin_detach.preserve_volume)
         return {'FINISHED'}
 
     def invoke(self, context, event):
@@ -232,7 +224,7 @@ class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        Deformation(bound_owner(context)).reset()
+        api.reset(bound_owner(context))
         self.report({'INFO'}, "Skin Detach: back to the rest shape")
         return {'FINISHED'}
 
@@ -247,7 +239,7 @@ class SKIN_DETACH_OT_clear(_BoundOperator, bpy.types.Operator):
         obj = bound_owner(context)
         if context.active_object is not obj:
             context.view_layer.objects.active = obj
-        skin_rig.clear(obj)
+        api.clear(obj)
         self.report({'INFO'}, f"Skin Detach: cleared {obj.name}")
         return {'FINISHED'}
 

@@ -106,23 +106,23 @@ def _collection():
 
 
 def _remove_proxy(obj):
+    """Remove every proxy object made for ``obj`` (its current one and any left from a lost binding)."""
     import bpy
-    if stored.has_binding(obj):
-        proxy = obj[stored.KEY].get("proxy")
-        if proxy is not None:
-            mesh = proxy.data
-            bpy.data.objects.remove(proxy, do_unlink=True)
-            if mesh.users == 0:
-                bpy.data.meshes.remove(mesh)
+    for proxy in [o for o in bpy.data.objects if o.get(PROXY_TAG) == obj]:
+        mesh = proxy.data
+        bpy.data.objects.remove(proxy, do_unlink=True)
+        if mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
 
 
 def handle_size(obj):
     return 0.03 * bbox_diagonal(np.array([v[:] for v in obj.bound_box]))
 
 
-def add_from_selection(context, kind):
-    """New handle or anchor from the selected vertices of the active object: the bound mesh
-    (Edit Mode selection; Edit Mode is left first so the selection is current) or its proxy."""
+def selection(context):
+    """The bound mesh object behind the active object and the vertices selected on the active
+    object: the bound mesh (its Edit Mode selection; Edit Mode is left first so the selection is
+    current) or its proxy. Returns (obj, vertex ids (k,), whether they are proxy vertices)."""
     import bpy
     active = context.active_object
     obj = owner_of(active)
@@ -132,7 +132,6 @@ def add_from_selection(context, kind):
         bpy.ops.object.mode_set(mode='OBJECT')
     if obj.mode == 'EDIT':
         raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode")
-    binding = stored.open_binding(obj)
     if active.type != 'MESH':  # a handle is active: take the selection of the mesh itself
         active = obj
     selected = np.zeros(len(active.data.vertices), dtype=bool)
@@ -141,14 +140,7 @@ def add_from_selection(context, kind):
     if picked.size == 0:
         raise SkinDetachError(f"selection: expected selected vertices on {active.name!r}, got none "
                               f"(select some in Edit Mode)")
-    if active == obj:
-        detail, proxy_ids = picked, binding.surface.proxy_vertices_for(picked)
-    else:
-        detail, proxy_ids = None, picked
-    current = np.empty(3 * len(binding.proxy.data.vertices), dtype=np.float32)
-    binding.proxy.data.attributes["position"].data.foreach_get("vector", current)
-    return handles.add(obj, binding.proxy, kind, proxy_ids, binding.surface.proxy_vertices,
-                       current.reshape(-1, 3).astype(np.float64), detail_ids=detail, size=handle_size(obj))
+    return obj, picked, active is not obj
 
 
 def clear(obj):

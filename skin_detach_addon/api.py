@@ -1,0 +1,131 @@
+"""Scripting API: plain functions on a mesh object. The add-on's operators call these same
+functions, so a script and a click do the same thing.
+
+    from skin_detach_addon import api          # installed extension: from bl_ext.user_default.skin_detach_addon import api
+
+    api.build(obj, target_faces=1000)          # bind obj (n vertices) to a proxy of ~1,000 faces
+    api.add_anchor(obj, base_ids)              # (k,) vertex indices of obj held in place
+    grip = api.add_handle(obj, top_ids)        # an empty that carries those vertices
+    grip.location.x += 0.2
+    api.deform(obj)                            # solve from every handle, write obj's positions
+    api.bake(obj, "1-250", into="FILES", path="out/mesh_####.obj")
+    api.reset(obj); api.clear(obj)
+
+Every function takes the bound mesh object (its proxy or one of its handles are accepted and
+mean the same mesh) and raises :class:`SkinDetachError` with a message naming the argument,
+the expected and the actual value; nothing is written when it raises.
+"""
+
+import numpy as np
+
+from .blender import baking, handles, mesh_io, skin_rig
+from .blender import binding as stored
+from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
+from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
+from .core.errors import SkinDetachError
+from .core.validation import as_vertex_ids
+
+__all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
+           "is_bound", "handles_of", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL", "SETTLE_TOL"]
+
+
+def _owner(obj):
+    owner = skin_rig.owner_of(obj)
+    if owner is None:
+        raise SkinDetachError("obj: expected a mesh object, got None")
+    return owner
+
+
+def _bound(obj):
+    owner = _owner(obj)
+    if not stored.has_binding(owner):
+        raise SkinDetachError(f"obj {owner.name!r}: expected a mesh bound by Skin Detach, it has no binding; "
+                              f"call build() first")
+    return owner
+
+
+def build(obj, target_faces=1000, normal_test=True, progress=None):
+    """Bind ``obj`` (a mesh object in Object Mode) to a proxy of about ``target_faces`` triangles
+    and make the proxy object; returns the build figures (dict: seconds per stage, proxy_faces,
+    case1/2/3 counts, handles_kept, ...). A previous binding is replaced: handles made from mesh
+    vertices are kept (back at rest), those made from proxy vertices are removed.
+    ``progress(fraction, stage)`` is called as the build goes."""
+    obj = _owner(obj)
+    skin_rig.check_mesh_object(obj)
+    if obj.mode == 'EDIT':
+        raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, it is in Edit Mode")
+    return skin_rig.build(obj, target_faces, normal_test, progress)
+
+
+def add_handle(obj, vertex_ids, on_proxy=False):
+    """A handle empty carrying ``vertex_ids`` (k,): vertex indices of ``obj``'s mesh (or of the
+    proxy with ``on_proxy=True``). Move, rotate or animate the empty, then :func:`deform`."""
+    return _add(obj, vertex_ids, handles.HANDLE, on_proxy)
+
+
+def add_anchor(obj, vertex_ids, on_proxy=False):
+    """An anchor empty holding ``vertex_ids`` (k,) in place (indices as in :func:`add_handle`)."""
+    return _add(obj, vertex_ids, handles.ANCHOR, on_proxy)
+
+
+def _add(obj, vertex_ids, kind, on_proxy):
+    obj = _bound(obj)
+    binding = stored.open_binding(obj)
+    surface = binding.surface
+    if on_proxy:
+        proxy_ids = as_vertex_ids("vertex_ids", vertex_ids, surface.proxy_vertices.shape[0])
+        detail = None
+    else:
+        detail = as_vertex_ids("vertex_ids", vertex_ids, surface.n_detail)
+        proxy_ids = surface.proxy_vertices_for(detail)
+    current = mesh_io.read_positions(binding.proxy.data).astype(np.float64)
+    return handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current,
+                       detail_ids=detail, size=skin_rig.handle_size(obj))
+
+
+def deform(obj, preserve_volume=True, tol=SETTLE_TOL):
+    """Solve the proxy from the current transforms of every handle and anchor of ``obj`` and
+    write the rebuilt positions into its mesh (and the proxy). ``tol``: :data:`SETTLE_TOL` for a
+    result to keep, :data:`DRAG_TOL` while interacting. Returns a dict: milliseconds, iterations,
+    converged, volume_change (of the proxy). Raises, writing nothing, when the mesh was edited
+    since Skin Detach last wrote it."""
+    import bpy
+    obj = _bound(obj)
+    bpy.context.view_layer.update()  # world matrices of handles moved by a script
+    deformation = Deformation(obj, preserve_volume)
+    stored.check_unedited(obj)
+    report = deformation.step(tol)
+    stored.mark_written(obj, report.positions)
+    return {"milliseconds": report.milliseconds, "iterations": report.iterations, "converged": report.converged,
+            "volume_change": report.volume_change}
+
+
+def reset(obj):
+    """Put the mesh and proxy back to the bound rest shape (bit-exact) and every handle back at rest."""
+    Deformation(_bound(obj)).reset()
+
+
+def clear(obj):
+    """Remove the proxy, every handle and the binding of ``obj``; the mesh keeps its current shape."""
+    skin_rig.clear(_bound(obj))
+
+
+def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
+    """Evaluate the scene at each of ``frames`` (``"1-250"``, ``"1-10,20"`` or an iterable of
+    ints) and store the rebuilt mesh: ``into`` SHAPE_KEYS (one animated key per frame), OBJECTS
+    (one object per frame) or FILES (``path`` like ``"out/mesh_####.obj"`` or ``.ply``, with UVs).
+    Returns one dict per frame (frame, milliseconds, iterations, converged, volume_change,
+    output). Idempotent; the mesh and the scene frame are left as they were. See
+    :func:`skin_detach_addon.blender.baking.bake`."""
+    return baking.bake(_bound(obj), frames, into, path, preserve_volume, apply_modifiers, progress)
+
+
+def is_bound(obj):
+    """True when ``obj`` (or the mesh it belongs to) carries a Skin Detach binding."""
+    return stored.has_binding(skin_rig.owner_of(obj))
+
+
+def handles_of(obj):
+    """The handle and anchor empties of ``obj``, sorted by name."""
+    return handles.handles_of(_bound(obj))
+

@@ -1,0 +1,267 @@
+"""Baking: the rebuilt detail of a bound mesh, frame by frame over a range, into shape keys,
+new objects or one mesh file per frame.
+
+At every frame the scene is evaluated (so animated, driven or constrained handle empties are
+where the animation puts them), the proxy is solved to the settle tolerance and the detail is
+rebuilt from the stored rest. Re-running a bake replaces what the same frames made before
+(same shape key, same baked object, same file), so it is idempotent. When it ends, or fails,
+the scene frame, the mesh and its shape keys are as they were before; a failed bake also
+removes the shape keys and objects it had added.
+"""
+
+import os
+import re
+import time
+
+from ..core.errors import SkinDetachError
+from . import binding as stored
+from . import mesh_io
+from .deformation import Deformation
+
+SHAPE_KEYS = "SHAPE_KEYS"
+OBJECTS = "OBJECTS"
+FILES = "FILES"
+MODES = (SHAPE_KEYS, OBJECTS, FILES)
+#: Baked shape keys are named ``skin_detach_0012`` (the frame number, zero-padded).
+KEY_PREFIX = "skin_detach_"
+#: Baked objects go into this collection, tagged with ``{"owner": obj, "frame": f}``.
+COLLECTION = "Skin Detach Bake"
+BAKE_TAG = "_skin_detach_bake"
+FORMATS = (".obj", ".ply")
+
+
+def parse_frames(text):
+    """Frame numbers from ``"1-250"``, ``"12"`` or ``"1-10,20,30-40"`` (inclusive, in order, no repeats)."""
+    frames = []
+    for part in str(text).replace(" ", "").split(","):
+        match = re.fullmatch(r"(-?\d+)(?:-(-?\d+))?", part)
+        if match is None:
+            raise SkinDetachError(f"frames: expected a frame or range like '1-250' or '1-10,20', got {text!r}")
+        first = int(match.group(1))
+        last = int(match.group(2)) if match.group(2) is not None else first
+        if last < first:
+            raise SkinDetachError(f"frames: expected a range that does not run backwards, got {part!r}")
+        frames.extend(f for f in range(first, last + 1) if f not in frames)
+    return frames
+
+
+def check_frames(frames):
+    """``frames`` (an iterable of ints or a :func:`parse_frames` string) as a non-empty list of ints."""
+    if isinstance(frames, str):
+        return parse_frames(frames)
+    try:
+        values = [int(f) for f in frames]
+    except (TypeError, ValueError):
+        raise SkinDetachError(f"frames: expected frame numbers, got {frames!r}") from None
+    if not values or any(v != f for v, f in zip(values, frames)):
+        raise SkinDetachError(f"frames: expected at least one whole frame number, got {frames!r}")
+    return list(dict.fromkeys(values))
+
+
+def file_path(pattern, frame):
+    """The file of ``frame`` for ``pattern``: a run of ``#`` becomes the zero-padded frame
+    (``out/bunny_####.obj`` -> ``out/bunny_0012.obj``); without ``#``, ``_####`` goes before the extension."""
+    if "#" not in pattern:
+        root, ext = os.path.splitext(pattern)
+        pattern = f"{root}_####{ext}"
+    return re.sub(r"#+", lambda m: f"{frame:0{len(m.group(0))}d}", pattern)
+
+
+def check_output(pattern):
+    """Raise unless ``pattern`` names .obj or .ply files in a folder that exists (or can be made) and is writable."""
+    ext = os.path.splitext(pattern)[1].lower()
+    if ext not in FORMATS:
+        raise SkinDetachError(f"path: expected a file name ending in {' or '.join(FORMATS)}, got {pattern!r}")
+    folder = os.path.dirname(os.path.abspath(pattern))
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as exc:
+        raise SkinDetachError(f"path: expected a folder that can be created, got {folder!r} ({exc.strerror})") from None
+    if not os.access(folder, os.W_OK):
+        raise SkinDetachError(f"path: expected a writable folder, got {folder!r} (permission denied)")
+
+
+def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
+    """Bake ``obj`` (a bound mesh object) at each of ``frames``; returns one dict per frame:
+    frame, milliseconds (solve + rebuild), iterations, converged, volume_change, output (the
+    shape key name, object name or file path).
+
+    into             SHAPE_KEYS: one shape key per frame, keyed 0-1-0 around its frame
+                     (linear), so playback shows the animation without the add-on;
+                     OBJECTS: one new object per frame (a copy carrying the mesh's UVs,
+                     materials and vertex groups) in the "Skin Detach Bake" collection;
+                     FILES: one .obj or .ply file per frame at ``path`` (see :func:`file_path`),
+                     with UVs, written by Blender's own exporter.
+    apply_modifiers  FILES only: export with the object's modifiers applied (default: the mesh
+                     itself, the same vertices in the same order as the original).
+    progress         called as ``progress(done, total, record)`` after every frame.
+    """
+    import bpy
+
+    if into not in MODES:
+        raise SkinDetachError(f"into: expected one of {', '.join(MODES)}, got {into!r}")
+    frames = check_frames(frames)
+    if into == FILES:
+        if not path:
+            raise SkinDetachError("path: expected a file name pattern such as 'out/mesh_####.obj' for FILES, got none")
+        check_output(path)
+    scene = bpy.context.scene
+    if obj.name not in scene.objects:
+        raise SkinDetachError(f"object {obj.name!r}: expected it in the current scene {scene.name!r}, it is not")
+    deformation = Deformation(obj, preserve_volume)
+    stored.check_unedited(obj)
+    saved_frame = (scene.frame_current, scene.frame_subframe)
+    saved_mesh = mesh_io.snapshot(obj.data)
+    writer = {SHAPE_KEYS: _ShapeKeyWriter, OBJECTS: _ObjectWriter, FILES: _FileWriter}[into](obj, path, apply_modifiers)
+    records = []
+    try:
+        for frame in frames:
+            scene.frame_set(frame)
+            start = time.perf_counter()
+            result, detail, _ = deformation.solve()
+            milliseconds = 1000 * (time.perf_counter() - start)
+            records.append({"frame": frame, "milliseconds": milliseconds, "iterations": result.iterations,
+                            "converged": result.converged, "volume_change": result.volume_change,
+                            "output": writer.write(frame, detail)})
+            if progress is not None:
+                progress(len(records), len(frames), records[-1])
+    except BaseException:
+        writer.undo()
+        raise
+    finally:
+        mesh_io.restore(obj.data, saved_mesh)
+        scene.frame_set(saved_frame[0], subframe=saved_frame[1])
+    return records
+
+
+class _ShapeKeyWriter:
+    def __init__(self, obj, path, apply_modifiers):
+        self.obj = obj
+        self.made = []
+        if obj.data.shape_keys is None:
+            self.made.append(obj.shape_key_add(name="Basis", from_mix=False).name)
+
+    def write(self, frame, detail):
+        blocks = self.obj.data.shape_keys.key_blocks
+        name = f"{KEY_PREFIX}{frame:04d}"
+        key = blocks.get(name)
+        if key is None:
+            key = self.obj.shape_key_add(name=name, from_mix=False)
+            self.made.append(name)
+        key.relative_key = blocks[0]
+        key.slider_min, key.slider_max = 0.0, 1.0
+        key.data.foreach_set("co", detail.ravel())
+        for at, value in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
+            key.value = value
+            key.keyframe_insert("value", frame=at)
+        for fcurve in _fcurves(self.obj.data.shape_keys):
+            if fcurve.data_path == f'key_blocks["{name}"].value':
+                for point in fcurve.keyframe_points:
+                    point.interpolation = 'LINEAR'
+        return name
+
+    def undo(self):
+        blocks = self.obj.data.shape_keys.key_blocks if self.obj.data.shape_keys else {}
+        for name in reversed(self.made):
+            if name in blocks:
+                self.obj.shape_key_remove(blocks[name])
+
+
+def _fcurves(id_data):
+    """F-curves of the action of ``id_data`` (Blender 4.2's flat actions and 4.4+'s slotted ones)."""
+    animation = id_data.animation_data
+    if animation is None or animation.action is None:
+        return []
+    action = animation.action
+    slot = getattr(animation, "action_slot", None)
+    if slot is None:
+        return list(action.fcurves)
+    from bpy_extras import anim_utils
+    channelbag = anim_utils.action_get_channelbag_for_slot(action, slot)
+    return [] if channelbag is None else list(channelbag.fcurves)
+
+
+class _ObjectWriter:
+    def __init__(self, obj, path, apply_modifiers):
+        import bpy
+        self.obj = obj
+        self.made = []
+        self.collection = bpy.data.collections.get(COLLECTION)
+        if self.collection is None:
+            self.collection = bpy.data.collections.new(COLLECTION)
+        scene = bpy.context.scene
+        if self.collection.name not in scene.collection.children:
+            scene.collection.children.link(self.collection)
+
+    def write(self, frame, detail):
+        import bpy
+        baked = next((o for o in self.collection.objects if BAKE_TAG in o and o[BAKE_TAG].get("owner") == self.obj
+                      and o[BAKE_TAG].get("frame") == frame and len(o.data.vertices) == len(detail)), None)
+        if baked is None:
+            baked = self.obj.copy()
+            baked.data = self.obj.data.copy()
+            for key in (stored.KEY, BAKE_TAG):
+                if key in baked:
+                    del baked[key]
+            baked.name = f"{self.obj.name}_bake_{frame:04d}"
+            baked.parent = None
+            baked.animation_data_clear()
+            self.collection.objects.link(baked)
+            baked[BAKE_TAG] = {"owner": self.obj, "frame": frame}
+            self.made.append(baked.name)
+        baked.matrix_world = self.obj.matrix_world.copy()
+        mesh_io.write_positions(baked.data, detail)
+        bpy.context.view_layer.update()
+        return baked.name
+
+    def undo(self):
+        import bpy
+        for name in self.made:
+            baked = bpy.data.objects.get(name)
+            if baked is not None:
+                mesh = baked.data
+                bpy.data.objects.remove(baked, do_unlink=True)
+                if mesh.users == 0:
+                    bpy.data.meshes.remove(mesh)
+
+
+class _FileWriter:
+    def __init__(self, obj, path, apply_modifiers):
+        self.obj = obj
+        self.pattern = path
+        self.apply_modifiers = bool(apply_modifiers)
+
+    def write(self, frame, detail):
+        import bpy
+        target = os.path.abspath(file_path(self.pattern, frame))
+        mesh_io.write_positions(self.obj.data, detail)
+        view_layer = bpy.context.view_layer
+        selected = [o for o in view_layer.objects if o.select_get()]
+        active = view_layer.objects.active
+        try:
+            for o in selected:
+                o.select_set(False)
+            try:
+                self.obj.select_set(True)
+            except RuntimeError:
+                raise SkinDetachError(f"object {self.obj.name!r}: expected it in the view layer to export it, "
+                                      f"its collection is excluded") from None
+            view_layer.objects.active = self.obj
+            if target.lower().endswith(".obj"):
+                bpy.ops.wm.obj_export(filepath=target, check_existing=False, export_selected_objects=True,
+                                      export_uv=True, export_materials=False,
+                                      apply_modifiers=self.apply_modifiers)
+            else:
+                bpy.ops.wm.ply_export(filepath=target, check_existing=False, export_selected_objects=True,
+                                      export_uv=True, apply_modifiers=self.apply_modifiers)
+        finally:
+            self.obj.select_set(False)
+            for o in selected:
+                o.select_set(True)
+            view_layer.objects.active = active
+        if not os.path.isfile(target):
+            raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
+        return target
+
+    def undo(self):
+        pass

@@ -1,0 +1,86 @@
+"""scripts/bake.py with the bpy module: files per frame, a baked .blend, idempotence, failures."""
+
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import quad_sphere  # noqa: E402
+from test_blender_api import animate, scripted_rig  # noqa: E402
+
+BAKE = pathlib.Path(__file__).resolve().parent.parent / "scripts" / "bake.py"
+
+
+def bake(*args):
+    return subprocess.run([sys.executable, str(BAKE), *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture
+def rig_file(scene, tmp_path):
+    obj, handle = scripted_rig()
+    animate(handle, [(1, (0, 0, 0)), (4, (0.3, 0, 0.2))])
+    scene.frame_start, scene.frame_end = 1, 4
+    path = tmp_path / "rig.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+
+
+def test_bake_script_writes_one_file_per_frame_and_reruns_identically(rig_file, tmp_path):
+    run = bake("--blend", rig_file, "--frames", "2-3", "--output", tmp_path / "out" / "q_####.obj")
+    assert run.returncode == 0, run.stderr
+    first = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    assert sorted(first) == ["q_0002.obj", "q_0003.obj"]
+    assert "frame 3 (2/2)" in run.stdout
+    again = bake("--blend", rig_file, "--frames", "2-3", "--output", tmp_path / "out" / "q_####.obj")
+    assert again.returncode == 0 and {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == first
+
+
+def test_bake_script_saves_shape_keys_into_a_blend(rig_file, tmp_path):
+    run = bake("--blend", rig_file, "--output", tmp_path / "baked.blend")  # the scene's range, 1-4
+    assert run.returncode == 0, run.stderr
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "baked.blend"))
+    keys = bpy.data.objects["quads"].data.shape_keys.key_blocks
+    assert [k.name for k in keys][1:] == [f"skin_detach_000{f}" for f in range(1, 5)]
+    top = np.empty(3 * len(keys[0].data), dtype=np.float32)
+    keys["skin_detach_0004"].data.foreach_get("co", top)
+    rest = np.empty_like(top)
+    keys["Basis"].data.foreach_get("co", rest)
+    assert np.abs(top - rest).max() > 0.2
+
+
+def test_bake_script_fails_with_a_message(rig_file, tmp_path, scene):
+    run = bake("--blend", rig_file, "--object", "nope", "--output", tmp_path / "x.obj")
+    assert run.returncode == 1 and "--object" in run.stderr and "quads" in run.stderr
+    blocker = tmp_path / "blocker"
+    blocker.write_text("")
+    run = bake("--blend", rig_file, "--output", blocker / "x.obj")
+    assert run.returncode == 1 and "folder" in run.stderr
+    run = bake("--blend", tmp_path / "missing.blend", "--output", tmp_path / "x.obj")
+    assert run.returncode == 1 and "--blend" in run.stderr
+    bpy.ops.wm.read_homefile(use_empty=True)
+    quad_sphere()
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "bare.blend"))
+    run = bake("--blend", tmp_path / "bare.blend", "--object", "quads", "--output", tmp_path / "x.obj")
+    assert run.returncode == 1 and "neither" in run.stderr
+    run = bake("--blend", rig_file, "--frames", "9-1", "--output", tmp_path / "x.obj")
+    assert run.returncode == 1 and "frames" in run.stderr
+
+
+def test_bake_script_builds_a_missing_binding_from_the_handles(scene, tmp_path):
+    from skin_detach_addon.blender import binding
+    obj, handle = scripted_rig()
+    animate(handle, [(1, (0, 0, 0)), (2, (0.3, 0, 0.2))])
+    del obj[binding.KEY]  # a file whose binding was lost; its handles remain
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "lost.blend"))
+    run = bake("--blend", tmp_path / "lost.blend", "--object", "quads", "--frames", "2", "--target-faces", 200,
+               "--output", tmp_path / "lost.blend")
+    assert run.returncode == 0, run.stderr
+    assert "building the binding" in run.stdout and "binding built first" in run.stdout
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "lost.blend"))
+    proxies = [o for o in bpy.data.objects if "_skin_detach_proxy_of" in o]
+    assert len(proxies) == 1 and binding.has_binding(bpy.data.objects["quads"])
+    assert "skin_detach_0002" in bpy.data.objects["quads"].data.shape_keys.key_blocks
