@@ -3,7 +3,7 @@ PYTHON ?= python3.11
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench extension clean
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -22,5 +22,8 @@ bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_deform.py
 	$(PY) scripts/benchmark_blender.py
 
+extension: $(VENV)/.installed
+	$(PY) scripts/build_extension.py
+
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out build dist .pytest_cache
