@@ -1,6 +1,8 @@
 """Invariants of the dual-Laplacian proxy solver: rest, rigid motion, scale, large rotations,
 odd proxies, convergence, volume, bad input."""
 
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -193,3 +195,19 @@ def test_rigidity_reduces_stretching_on_the_bend_scenario(armadillo_proxy):
     assert abs(rigid.volume_change) <= 0.01
     with pytest.raises(SkinDetachError, match="rigidity"):
         DualLaplacian(points, tris, ids, rigidity=-1.0)
+
+
+def test_a_cycling_solve_stops_early_with_its_calmest_iterate():
+    """A bent armadillo proxy (as bound in Blender) whose volume-kept iteration cycles around a
+    fold: the solve gives up STALL_ITERATIONS after its smallest change and says it did not converge."""
+    from skin_detach_addon.core.dual_laplacian import STALL_ITERATIONS
+    case = np.load(pathlib.Path(__file__).parent / "data" / "cycling_bend.npz")
+    solver = DualLaplacian(case["pv"], case["pf"], case["ids"], preserve_volume=True)
+    result = solver.solve(case["targets"], max_iter=200, tol=1e-12)
+    assert not result.converged and result.iterations < 200
+    best = int(np.argmin(result.history))
+    assert result.iterations == best + 1 + STALL_ITERATIONS
+    assert np.abs(result.vertices[case["ids"]] - case["targets"]).max() < 1e-9
+    assert abs(result.volume_change) < 1e-3
+    volume_free = DualLaplacian(case["pv"], case["pf"], case["ids"], preserve_volume=False)
+    assert volume_free.solve(case["targets"], max_iter=200, tol=1e-12).converged

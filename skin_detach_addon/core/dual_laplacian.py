@@ -45,6 +45,8 @@ DEFAULT_RIGIDITY = 0.0
 VOLUME_NEWTON_STEPS = 3
 #: Past iterates mixed by Anderson acceleration of the normal-update iteration.
 ANDERSON_WINDOW = 5
+#: Stop when this many iterations in a row have not reached a new smallest change.
+STALL_ITERATIONS = 12
 
 
 class _Anderson:
@@ -324,8 +326,7 @@ class DualLaplacian:
     def _keep_volume(self, points, direction):
         """``points`` moved by lambda_c ``direction`` per constrained closed component c so that
         its volume returns to rest: V(X + lambda d) is a cubic in lambda, solved by scalar
-        Newton steps. Also returns the volume gradient at the moved points, which the next
-        iteration turns into its direction."""
+        Newton steps."""
         f = self.faces[self._closed_faces]
         x, d = points[f], direction[f]
         x0, x1, x2, d0, d1, d2 = x[:, 0], x[:, 1], x[:, 2], d[:, 0], d[:, 1], d[:, 2]
@@ -342,8 +343,7 @@ class DualLaplacian:
             slope = coeffs[:, 1] + step * (2 * coeffs[:, 2] + step * 3 * coeffs[:, 3])
             safe = np.abs(slope) > 1e-300
             step[safe] -= value[safe] / slope[safe]
-        moved = points + step[self._vertex_slot][:, None] * direction
-        return moved, self._volume_gradient(x + step[self._closed_face_slot][:, None, None] * d)
+        return points + step[self._vertex_slot][:, None] * direction
 
     def _volume_gradient(self, corners):
         """(m, 3) gradient of the closed components' volumes from their faces' ``corners``
@@ -363,7 +363,9 @@ class DualLaplacian:
 
         ``initial`` (m, 3), e.g. the previous result while dragging, warm-starts the normals.
         Stops when the mean squared change of the vertices in one iteration, over the squared
-        bounding-box diagonal, is at most ``tol``, or after ``max_iter`` iterations.
+        bounding-box diagonal, is at most ``tol`` (converged), after ``max_iter`` iterations, or
+        when :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
+        cycles, e.g. around a fold): then the iterate with the smallest change is returned.
         """
         targets = as_points("constrained_positions", constrained_positions, self.constrained.size)
         points = self.rest.copy() if initial is None else as_points("initial", initial, self.rest.shape[0]).copy()
@@ -383,8 +385,6 @@ class DualLaplacian:
         keep_volume = self._closed.size > 0
         free = self.free
 
-        state = {"gradient": None}
-
         def step(current):
             """One fixed-point update of the free vertices (n_free, 3) -> (n_free, 3)."""
             points[free] = current
@@ -395,22 +395,22 @@ class DualLaplacian:
                 out = points.copy()
                 out[free] = self._lu.solve(np.ascontiguousarray(rhs))
                 return out[free]
-            # The volume direction K^-1 grad V (gradient of the last iterate) rides in the same solve.
-            if state["gradient"] is None:
-                state["gradient"] = self._volume_gradient(points[self.faces[self._closed_faces]])
-            gradient = state["gradient"][free] * self._free_in_closed[:, None]
+            # The volume direction K^-1 grad V, with the gradient at this iterate (so that the map
+            # depends on ``current`` alone, as Anderson acceleration needs), rides in the same solve.
+            gradient = self._volume_gradient(points[self.faces[self._closed_faces]])[free] * \
+                self._free_in_closed[:, None]
             solved = self._lu.solve(np.ascontiguousarray(np.hstack([rhs, gradient])))
             out = points.copy()
             out[free] = solved[:, :3]
             direction = np.zeros_like(points)
             direction[free] = solved[:, 3:]
-            out, state["gradient"] = self._keep_volume(out, direction)
-            return out[free]
+            return self._keep_volume(out, direction)[free]
 
         history = []
         converged = False
         accelerator = _Anderson(ANDERSON_WINDOW)
         current = points[free].copy()
+        best, best_change, best_at = current, np.inf, 0
         for iterations in range(1, int(max_iter) + 1):
             mapped = step(current)
             residual = mapped - current
@@ -419,6 +419,11 @@ class DualLaplacian:
             if change <= tol:
                 current = mapped
                 converged = True
+                break
+            if change < best_change:
+                best, best_change, best_at = mapped, change, iterations
+            elif iterations - best_at >= STALL_ITERATIONS:
+                current = best  # cycling (e.g. a fold whose normals flip back and forth): keep the calmest
                 break
             current = accelerator.next(current, mapped, change)
         points[free] = current
