@@ -18,9 +18,7 @@ test: $(VENV)/.installed
 	$(PY) -m pytest -q tests
 
 bench: $(VENV)/.installed
-	$(PY) scripts/benchmark_core.py
-	$(PY) scripts/benchmark_deform.py
-	$(PY) scripts/benchmark_blender.py
+	$(PY) scripts/benchmark.py --json out/benchmark.json
 
 extension: $(VENV)/.installed
 	$(PY) scripts/build_extension.py

@@ -13,13 +13,12 @@ prints the figures.
 
 import argparse
 import json
-import math
 import pathlib
 import time
 
 import numpy as np
 
-from mesh_tools import ROOT, SIZES, armadillo
+from mesh_tools import ROOT, SIZES, armadillo, blender_mesh
 
 import bpy
 from mathutils import Matrix, Vector
@@ -29,35 +28,12 @@ from skin_detach_addon.blender import binding, mesh_io
 from skin_detach_addon.core.bend_scenario import bend_scenario
 
 
-def mesh_object(name, points, triangles):
-    mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(points.shape[0])
-    mesh.loops.add(triangles.size)
-    mesh.polygons.add(triangles.shape[0])
-    mesh.vertices.foreach_set("co", points.astype(np.float32).ravel())
-    mesh.loops.foreach_set("vertex_index", triangles.astype(np.int32).ravel())
-    mesh.polygons.foreach_set("loop_start", np.arange(0, triangles.size, 3, dtype=np.int32))
-    mesh.polygons.foreach_set("use_smooth", np.ones(triangles.shape[0], dtype=bool))
-    mesh.update()
-    obj = bpy.data.objects.new(name, mesh)
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
-
-
 def drag(obj, handle, scenario, steps):
     """Move the handle empty along the bend in ``steps`` moves, solving after each; ms per step."""
     rest_world = np.array(handle.matrix_world)
-    r = scenario.rotation
-    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    angle = math.atan2(np.linalg.norm(axis) / 2, (np.trace(r) - 1) / 2)
     times = []
     for k in range(1, steps + 1):
-        t = k / steps
-        turn = np.array(Matrix.Rotation(angle * t, 3, Vector(axis / np.linalg.norm(axis))))
-        motion = np.eye(4)
-        motion[:3, :3] = turn
-        motion[:3, 3] = scenario.pivot - turn @ scenario.pivot + t * scenario.shift
-        handle.matrix_world = Matrix((motion @ rest_world).tolist())
+        handle.matrix_world = Matrix((scenario.motion(k / steps) @ rest_world).tolist())
         start = time.perf_counter()
         api.deform(obj, tol=api.DRAG_TOL)
         times.append(1000 * (time.perf_counter() - start))
@@ -164,7 +140,7 @@ def main():
     bpy.ops.wm.read_homefile(use_empty=True)
     points, triangles = armadillo(args.size)
     points = points[:, [0, 2, 1]] * [1, -1, 1]  # OBJ's Y-up to Blender's Z-up
-    obj = mesh_object("armadillo", points, triangles)
+    obj = blender_mesh("armadillo", points, triangles)
     print(f"detail mesh: armadillo.obj subdivided to {points.shape[0]:,} vertices, {triangles.shape[0]:,} triangles")
     start = time.perf_counter()
     stats = api.build(obj, target_faces=args.target)

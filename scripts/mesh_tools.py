@@ -19,8 +19,13 @@ def bundled(name):
 
 
 def subdivide(points, triangles, parts):
-    """Flat subdivision: ``parts`` = 4 splits every triangle at its edge midpoints (n + e
-    vertices), 6 also adds its centroid (n + e + f vertices). Positions stay on the input."""
+    """Flat subdivision: ``parts`` = 3 splits every triangle at its centroid (n + f vertices),
+    4 at its edge midpoints (n + e), 6 at both (n + e + f). Positions stay on the input."""
+    if parts == 3:
+        centre = np.arange(triangles.shape[0]) + points.shape[0]
+        a, b, c = triangles.T
+        return (np.concatenate([points, points[triangles].mean(axis=1)]),
+                np.concatenate([np.stack(f, axis=1) for f in ((a, b, centre), (b, c, centre), (c, a, centre))]))
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
     edges, inverse = np.unique(edges, axis=0, return_inverse=True)
     mid = inverse.reshape(3, -1).T + points.shape[0]
@@ -34,7 +39,7 @@ def subdivide(points, triangles, parts):
         new_points.append(points[triangles].mean(axis=1))
         faces = [(a, ab, centre), (ab, b, centre), (b, bc, centre), (bc, c, centre), (c, ca, centre), (ca, a, centre)]
     else:
-        raise ValueError(f"parts: expected 4 or 6, got {parts}")
+        raise ValueError(f"parts: expected 3, 4 or 6, got {parts}")
     return np.concatenate(new_points), np.concatenate([np.stack(f, axis=1) for f in faces])
 
 
@@ -44,12 +49,35 @@ SIZES = {
     "300K": (6,),
     "800K": (4, 4),
     "1.2M": (4, 6),
+    "1.8M": (6, 6),
 }
+
+
+def subdivided(name, parts):
+    """A bundled mesh flat-subdivided by each of ``parts`` in turn (see :func:`subdivide`)."""
+    points, triangles = bundled(name)
+    for step in parts:
+        points, triangles = subdivide(points, triangles, step)
+    return points, triangles
+
+
+def blender_mesh(name, points, triangles):
+    """A new smooth-shaded mesh object from (n, 3) points and (f, 3) triangles, linked to the scene."""
+    import bpy
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(points.shape[0])
+    mesh.loops.add(triangles.size)
+    mesh.polygons.add(triangles.shape[0])
+    mesh.vertices.foreach_set("co", points.astype(np.float32).ravel())
+    mesh.loops.foreach_set("vertex_index", triangles.astype(np.int32).ravel())
+    mesh.polygons.foreach_set("loop_start", np.arange(0, triangles.size, 3, dtype=np.int32))
+    mesh.polygons.foreach_set("use_smooth", np.ones(triangles.shape[0], dtype=bool))
+    mesh.update()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
 
 
 def armadillo(size):
     """armadillo.obj flat-subdivided to one of :data:`SIZES`."""
-    points, triangles = bundled("armadillo")
-    for parts in SIZES[size]:
-        points, triangles = subdivide(points, triangles, parts)
-    return points, triangles
+    return subdivided("armadillo", SIZES[size])

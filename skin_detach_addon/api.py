@@ -79,8 +79,11 @@ def _add(obj, vertex_ids, kind, on_proxy):
         detail = as_vertex_ids("vertex_ids", vertex_ids, surface.n_detail)
         proxy_ids = surface.proxy_vertices_for(detail)
     current = mesh_io.read_positions(binding.proxy.data).astype(np.float64)
-    return handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current,
-                       detail_ids=detail, size=skin_rig.handle_size(obj))
+    empty = handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current,
+                        detail_ids=detail, size=skin_rig.handle_size(obj))
+    import bpy
+    bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
+    return empty
 
 
 def deform(obj, preserve_volume=True, tol=SETTLE_TOL):

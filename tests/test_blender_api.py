@@ -170,3 +170,9 @@ def test_failed_bake_removes_what_it_added_and_leaves_the_mesh(scene, tmp_path):
     blocker.write_text("")
     with pytest.raises(SkinDetachError, match="folder"):
         api.bake(obj, "1", into=api.FILES, path=str(blocker / "mesh.obj"))
+
+
+def test_a_new_handle_has_a_current_world_matrix(scene):
+    obj, handle = scripted_rig()
+    centroid = mesh_io.read_positions(obj.data)[band(obj, 0.85, 1.0)].mean(axis=0)
+    assert np.linalg.norm(np.array(handle.matrix_world.translation) - centroid) < 0.1

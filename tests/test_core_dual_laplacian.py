@@ -211,3 +211,13 @@ def test_a_cycling_solve_stops_early_with_its_calmest_iterate():
     assert abs(result.volume_change) < 1e-3
     volume_free = DualLaplacian(case["pv"], case["pf"], case["ids"], preserve_volume=False)
     assert volume_free.solve(case["targets"], max_iter=200, tol=1e-12).converged
+
+
+def test_bend_motion_goes_from_identity_to_the_full_move(bundled):
+    points, _ = bundled("spot")
+    scenario = bend_scenario(points)
+    assert np.allclose(scenario.motion(0.0), np.eye(4))
+    full = scenario.motion(1.0)
+    assert np.allclose(points @ full[:3, :3].T + full[:3, 3], scenario.move(points))
+    half = scenario.motion(0.5)
+    assert np.allclose(half[:3, :3] @ half[:3, :3], full[:3, :3])

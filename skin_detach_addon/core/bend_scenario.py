@@ -25,6 +25,21 @@ class BendScenario:
         """``points`` (r, 3) carried by the handle's rigid motion."""
         return (points - self.pivot) @ self.rotation.T + self.pivot + self.shift
 
+    def motion(self, fraction=1.0):
+        """(4, 4) rigid motion of the handle ``fraction`` of the way: the rotation's angle and the
+        shift both scaled by ``fraction`` (about the same axis and pivot)."""
+        r = self.rotation
+        axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+        sine = np.linalg.norm(axis) / 2
+        angle = np.arctan2(sine, (np.trace(r) - 1) / 2) * fraction
+        out = np.eye(4)
+        if sine > 0:
+            k = axis / (2 * sine)
+            cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            out[:3, :3] = np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
+        out[:3, 3] = self.pivot - out[:3, :3] @ self.pivot + fraction * self.shift
+        return out
+
     def proxy_constraints(self, surface):
         """For a scenario over the detail vertices of ``surface`` (a SkinDetachedSurface): the
         constrained proxy ids (c,) (anchors first, then the handle) and their targets (c, 3)."""

@@ -1,0 +1,47 @@
+"""scripts/benchmark.py --quick (the 50K armadillo once per part): every figure is there and finite."""
+
+import json
+import math
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("bpy")
+
+BENCHMARK = pathlib.Path(__file__).resolve().parent.parent / "scripts" / "benchmark.py"
+
+
+def numbers(tree, path=""):
+    """Every number in a JSON tree with its path."""
+    if isinstance(tree, dict):
+        for key, value in tree.items():
+            yield from numbers(value, f"{path}.{key}")
+    elif isinstance(tree, list):
+        for k, value in enumerate(tree):
+            yield from numbers(value, f"{path}[{k}]")
+    elif isinstance(tree, (int, float)) and not isinstance(tree, bool):
+        yield path, tree
+
+
+def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
+    run = subprocess.run([sys.executable, str(BENCHMARK), "--quick", "--json", str(tmp_path / "b.json")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    for title in ("## Table 1 of the paper", "## Side by side", "## Scale", "ratios ours / Blender stack"):
+        assert title in run.stdout
+    figures = json.loads((tmp_path / "b.json").read_text())
+    table1, side, scale = figures["table1"][0], figures["side"][0], figures["scale"][0]
+    for key in ("build_s", "core_steps_per_s", "blender_steps_per_s", "handle_set_change_s", "peak_mb"):
+        assert key in table1, key
+    for method in (side["skin_detach"], side["blender_stack"], side["laplacian_whole_detail"]):
+        assert set(method["quality"]) == {"edge_distortion", "dihedral_change_deg", "handle_error_pct_diag",
+                                          "volume_change_pct", "rms_vs_arap_pct_diag"}
+    assert side["skin_detach"]["quality"]["handle_error_pct_diag"] < 0.01  # the handle is reached exactly
+    for key in ("build_s", "step_ms", "peak_mb"):
+        assert key in scale, key
+    found = dict(numbers(figures))
+    assert len(found) > 30
+    bad = {path: value for path, value in found.items() if not math.isfinite(value)}
+    assert not bad
