@@ -69,6 +69,7 @@ def add_anchor(obj, vertex_ids, on_proxy=False):
 
 
 def _add(obj, vertex_ids, kind, on_proxy):
+    import bpy
     obj = _bound(obj)
     binding = stored.open_binding(obj)
     surface = binding.surface
@@ -81,7 +82,6 @@ def _add(obj, vertex_ids, kind, on_proxy):
     current = mesh_io.read_positions(binding.proxy.data).astype(np.float64)
     empty = handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current,
                         detail_ids=detail, size=skin_rig.handle_size(obj))
-    import bpy
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
     return empty
 
