@@ -86,16 +86,6 @@ def ensure_binding(api, obj, args):
     return True
 
 
-def check_blend_output(path):
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError as exc:
-        raise BakeFailed(f"--output: expected a folder that can be created, got {folder!r} ({exc.strerror})") from None
-    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise BakeFailed(f"--output: expected a writable file, got {path!r} (permission denied)")
-
-
 def run(args):
     import bpy
 
@@ -111,7 +101,8 @@ def run(args):
         bpy.context.view_layer.objects.active = obj
     to_blend = args.output.lower().endswith(".blend")
     if to_blend:
-        check_blend_output(args.output)
+        from skin_detach_addon.blender.baking import check_folder
+        check_folder("--output", args.output)
     frames = args.frames or f"{scene.frame_start}-{scene.frame_end}"
     built = ensure_binding(api, obj, args)
     into = {"shape-keys": api.SHAPE_KEYS, "objects": api.OBJECTS}[args.into] if to_blend else api.FILES

@@ -15,7 +15,7 @@ import time
 
 from ..core.errors import SkinDetachError
 from . import binding as stored
-from . import mesh_io
+from . import mesh_io, skin_rig
 from .deformation import Deformation
 
 SHAPE_KEYS = "SHAPE_KEYS"
@@ -50,6 +50,7 @@ def check_frames(frames):
     if isinstance(frames, str):
         return parse_frames(frames)
     try:
+        frames = list(frames)
         values = [int(f) for f in frames]
     except (TypeError, ValueError):
         raise SkinDetachError(f"frames: expected frame numbers, got {frames!r}") from None
@@ -72,13 +73,20 @@ def check_output(pattern):
     ext = os.path.splitext(pattern)[1].lower()
     if ext not in FORMATS:
         raise SkinDetachError(f"path: expected a file name ending in {' or '.join(FORMATS)}, got {pattern!r}")
-    folder = os.path.dirname(os.path.abspath(pattern))
+    check_folder("path", pattern)
+
+
+def check_folder(argument, path):
+    """Raise unless the folder of file ``path`` exists (or can be made) and is writable, as is
+    ``path`` itself if it exists; ``argument`` names it in the message."""
+    folder = os.path.dirname(os.path.abspath(path))
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError as exc:
-        raise SkinDetachError(f"path: expected a folder that can be created, got {folder!r} ({exc.strerror})") from None
-    if not os.access(folder, os.W_OK):
-        raise SkinDetachError(f"path: expected a writable folder, got {folder!r} (permission denied)")
+        raise SkinDetachError(f"{argument}: expected a folder that can be created, got {folder!r} "
+                              f"({exc.strerror})") from None
+    if not os.access(folder, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise SkinDetachError(f"{argument}: expected a writable folder and file, got {path!r} (permission denied)")
 
 
 def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
@@ -183,18 +191,11 @@ def _fcurves(id_data):
 
 class _ObjectWriter:
     def __init__(self, obj, path, apply_modifiers):
-        import bpy
         self.obj = obj
         self.made = []
-        self.collection = bpy.data.collections.get(COLLECTION)
-        if self.collection is None:
-            self.collection = bpy.data.collections.new(COLLECTION)
-        scene = bpy.context.scene
-        if self.collection.name not in scene.collection.children:
-            scene.collection.children.link(self.collection)
+        self.collection = skin_rig.scene_collection(COLLECTION)
 
     def write(self, frame, detail):
-        import bpy
         baked = next((o for o in self.collection.objects if BAKE_TAG in o and o[BAKE_TAG].get("owner") == self.obj
                       and o[BAKE_TAG].get("frame") == frame and len(o.data.vertices) == len(detail)), None)
         if baked is None:
@@ -211,7 +212,6 @@ class _ObjectWriter:
             self.made.append(baked.name)
         baked.matrix_world = self.obj.matrix_world.copy()
         mesh_io.write_positions(baked.data, detail)
-        bpy.context.view_layer.update()
         return baked.name
 
     def undo(self):
@@ -219,10 +219,7 @@ class _ObjectWriter:
         for name in self.made:
             baked = bpy.data.objects.get(name)
             if baked is not None:
-                mesh = baked.data
-                bpy.data.objects.remove(baked, do_unlink=True)
-                if mesh.users == 0:
-                    bpy.data.meshes.remove(mesh)
+                skin_rig.remove_with_mesh(baked)
 
 
 class _FileWriter:

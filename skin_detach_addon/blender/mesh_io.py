@@ -38,8 +38,7 @@ def mesh_fingerprint(mesh):
     corners = np.empty(len(mesh.loops), dtype=np.int32)
     if corners.size:
         mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
-    counts = np.array([len(mesh.vertices), len(mesh.polygons), len(mesh.loops)], dtype=np.int64)
-    return _digest(len(mesh.vertices), counts, corners)
+    return _digest(len(mesh.vertices), np.array([len(mesh.polygons), len(mesh.loops)], dtype=np.int64), corners)
 
 
 def positions_digest(positions):

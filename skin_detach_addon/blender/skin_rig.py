@@ -83,7 +83,7 @@ def _make_proxy(obj, surface):
     mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
     mesh.update()
     proxy = bpy.data.objects.new(name, mesh)
-    _collection().objects.link(proxy)
+    scene_collection(COLLECTION).objects.link(proxy)
     proxy.parent = obj
     proxy.matrix_parent_inverse = Matrix.Identity(4)
     proxy.matrix_basis = Matrix.Identity(4)
@@ -94,12 +94,13 @@ def _make_proxy(obj, surface):
     return proxy
 
 
-def _collection():
+def scene_collection(name):
+    """The collection ``name`` (made if missing), linked under the current scene's collection."""
     import bpy
     scene = bpy.context.scene
-    collection = bpy.data.collections.get(COLLECTION)
+    collection = bpy.data.collections.get(name)
     if collection is None:
-        collection = bpy.data.collections.new(COLLECTION)
+        collection = bpy.data.collections.new(name)
     if collection.name not in scene.collection.children:
         scene.collection.children.link(collection)
     return collection
@@ -109,10 +110,16 @@ def _remove_proxy(obj):
     """Remove every proxy object made for ``obj`` (its current one and any left from a lost binding)."""
     import bpy
     for proxy in [o for o in bpy.data.objects if o.get(PROXY_TAG) == obj]:
-        mesh = proxy.data
-        bpy.data.objects.remove(proxy, do_unlink=True)
-        if mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
+        remove_with_mesh(proxy)
+
+
+def remove_with_mesh(obj):
+    """Delete a mesh object and its mesh when nothing else uses it."""
+    import bpy
+    mesh = obj.data
+    bpy.data.objects.remove(obj, do_unlink=True)
+    if mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
 
 
 def handle_size(obj):
