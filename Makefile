@@ -2,13 +2,22 @@
 PYTHON ?= python3.11
 VENV ?= .venv
 PY := $(VENV)/bin/python
+# The second test leg (CI): Blender 5.2 LTS as a module on Python 3.13, in its own environment.
+PYTHON313 ?= $(firstword $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13.*/bin/python3.13) $(shell command -v python3.13 2>/dev/null))
+VENV313 ?= .venv313
 
-.PHONY: demo test bench extension clean
+.PHONY: demo test test313 bench extension clean
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements-dev.txt
+	touch $@
+
+$(VENV313)/.installed: requirements-py313.txt
+	$(PYTHON313) -m venv $(VENV313)
+	$(VENV313)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV313)/bin/python -m pip install --quiet -r requirements-py313.txt
 	touch $@
 
 demo: $(VENV)/.installed
@@ -17,6 +26,14 @@ demo: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m pytest -q tests
 
+test313:
+	@if [ -z "$(PYTHON313)" ] || ! "$(PYTHON313)" -c "import sys; assert sys.version_info[:2] == (3, 13)" 2>/dev/null; then \
+		echo "NOTICE: no Python 3.13 on this machine: the Blender 5.2 (bpy 5.2.x, Python 3.13) test leg is skipped"; \
+	else \
+		$(MAKE) --no-print-directory $(VENV313)/.installed PYTHON313="$(PYTHON313)" && \
+		$(VENV313)/bin/python -m pytest -q tests; \
+	fi
+
 bench: $(VENV)/.installed
 	$(PY) scripts/benchmark.py --json out/benchmark.json
 
@@ -24,4 +41,4 @@ extension: $(VENV)/.installed
 	$(PY) scripts/build_extension.py
 
 clean:
-	rm -rf $(VENV) out build dist .pytest_cache
+	rm -rf $(VENV) $(VENV313) out build dist .pytest_cache

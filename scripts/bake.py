@@ -58,15 +58,14 @@ class BakeFailed(Exception):
     pass
 
 
-def find_object(bpy, name):
+def find_object(bpy, api, name):
     if name:
         obj = bpy.data.objects.get(name)
         if obj is None:
             raise BakeFailed(f"--object: expected an object of the file, got {name!r} (objects: "
                              f"{', '.join(sorted(o.name for o in bpy.data.objects if o.type == 'MESH')) or 'none'})")
         return obj
-    from skin_detach_addon.blender.binding import has_binding
-    bound = [o for o in bpy.data.objects if has_binding(o)]
+    bound = api.bound_objects()
     if len(bound) != 1:
         raise BakeFailed(f"--object: expected one bound mesh in the file to pick, found {len(bound)} "
                          f"({', '.join(o.name for o in bound) or 'none'}); name it with --object")
@@ -75,10 +74,9 @@ def find_object(bpy, name):
 
 def ensure_binding(api, obj, args):
     """Reuse the stored binding; build it when missing (or asked) and the rig has handles."""
-    from skin_detach_addon.blender import handles
     if api.is_bound(obj) and not args.rebuild:
         return False
-    if not handles.handles_of(obj):
+    if not api.handles_of(obj):
         raise BakeFailed(f"object {obj.name!r}: expected a Skin Detach binding or handles to build one from, "
                          f"it has neither; set the rig up in Blender first")
     print(f"bake: building the binding of {obj.name!r} ({args.target_faces} proxy faces)", flush=True)
@@ -96,13 +94,12 @@ def run(args):
             raise BakeFailed(f"--blend: expected an existing .blend file, got {args.blend!r}")
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene
-    obj = find_object(bpy, args.object)
+    obj = find_object(bpy, api, args.object)
     if bpy.context.view_layer.objects.active is None:
         bpy.context.view_layer.objects.active = obj
     to_blend = args.output.lower().endswith(".blend")
     if to_blend:
-        from skin_detach_addon.blender.baking import check_folder
-        check_folder("--output", args.output)
+        api.check_output_file("--output", args.output)
     frames = args.frames or f"{scene.frame_start}-{scene.frame_end}"
     built = ensure_binding(api, obj, args)
     into = {"shape-keys": api.SHAPE_KEYS, "objects": api.OBJECTS}[args.into] if to_blend else api.FILES
@@ -124,7 +121,9 @@ def run(args):
 def main():
     args = parse_args(script_argv())
     try:
-        from skin_detach_addon.core.errors import SkinDetachError
+        import bpy  # noqa: F401  (first: the bpy module makes mathutils importable)
+
+        from skin_detach_addon.api import SkinDetachError
         try:
             run(args)
         except (SkinDetachError, BakeFailed) as exc:

@@ -26,6 +26,7 @@ flat-subdivided twice; 1.8M stands in for the 2M row).
 
 import argparse
 import json
+import pathlib
 import math
 import os
 import resource
@@ -37,8 +38,10 @@ import time
 
 import numpy as np
 
-from benchmark_deform import arap_reference
-from mesh_tools import ROOT, SIZES, blender_mesh, subdivided
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
+
+from bench.arap import arap_reference
+from bench.meshes import ROOT, SIZES, blender_mesh, subdivided
 
 #: name -> (bundled mesh, flat subdivisions, proxy faces, paper row: model, vertices, proxy vertices, FPS, precompute)
 TABLE1 = {
@@ -71,7 +74,7 @@ def bind_bend(obj, target_faces):
     (build seconds, scenario, handle empty)."""
     from skin_detach_addon import api
     from skin_detach_addon.blender import mesh_io
-    from skin_detach_addon.core.bend_scenario import bend_scenario
+    from bench.scenario import bend_scenario
 
     start = time.perf_counter()
     api.build(obj, target_faces=target_faces)
@@ -153,7 +156,7 @@ def table1_row(name, steps):
 
 
 def quality(rest, deformed, triangles, scenario, arap):
-    from skin_detach_addon.core.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
+    from bench.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
     diag = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
     handle = np.linalg.norm(deformed[scenario.handle_ids] - scenario.move(rest[scenario.handle_ids]), axis=1)
     row = {"edge_distortion": edge_distortion(rest, deformed, triangles),
@@ -273,7 +276,7 @@ def side_row(size, steps):
 
 def scale_row(size, steps):
     from skin_detach_addon.core import SkinDetachedSurface
-    from skin_detach_addon.core.bend_scenario import bend_scenario
+    from bench.scenario import bend_scenario
     points, triangles = subdivided("armadillo", SIZES[size])
     baseline = peak_mb()
     start = time.perf_counter()
@@ -371,7 +374,6 @@ def main():
     parser.add_argument("--one", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
-        sys.path.insert(0, str(ROOT))
         print(json.dumps(run_one(args.one, args.steps)))
         return
     if args.quick:

@@ -9,6 +9,7 @@ process, so the build can be read against what the library alone costs on this m
 
 import argparse
 import json
+import pathlib
 import resource
 import subprocess
 import sys
@@ -16,7 +17,9 @@ import time
 
 import numpy as np
 
-from mesh_tools import SIZES, armadillo, bundled
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
+
+from bench.meshes import SIZES, armadillo, bundled
 
 PAPER_PRECOMPUTE = "52 min (332K-vertex armadillo, 1,000 faces, 2008 PC)"
 

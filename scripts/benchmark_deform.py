@@ -11,15 +11,20 @@ own stack and ARAP as measured for DESIGN.md are printed beside it.
 
 import argparse
 import json
+import pathlib
+import sys
 import time
 
 import numpy as np
 
-from mesh_tools import bundled
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
+
+from bench.arap import arap_reference
+from bench.meshes import bundled
+from bench.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
+from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
-from skin_detach_addon.core.bend_scenario import bend_scenario
-from skin_detach_addon.core.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
 
 DESIGN_ROWS = [
     ("Blender stack (Laplacian Deform proxy + Surface Deform), DESIGN.md", 0.081, 2.0, 4.3),
@@ -44,21 +49,6 @@ def drag_speed(points, triangles, faces, rigidity, steps=30):
         previous = result.vertices
     return {"proxy_faces": int(sds.proxy_faces.shape[0]), "rigidity": rigidity, "factor_ms": 1000 * factor,
             "step_ms_median": 1000 * float(np.median(times)), "iterations_median": float(np.median(iterations))}
-
-
-def arap_reference(points, triangles, scenario, iterations):
-    try:
-        import igl
-    except ImportError:
-        return None, None
-    fixed = np.concatenate([scenario.anchor_ids, scenario.handle_ids]).astype(np.int32)
-    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
-    data = igl.ARAPData()
-    data.max_iter = iterations
-    start = time.perf_counter()
-    igl.arap_precomputation(points, triangles.astype(np.int64), 3, fixed, data)
-    result = igl.arap_solve(targets, data, points.copy())
-    return result, time.perf_counter() - start
 
 
 def bend_quality(points, triangles, faces, preserve_volume, rigidity, arap):

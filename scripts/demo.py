@@ -14,18 +14,20 @@ prints the figures.
 import argparse
 import json
 import pathlib
+import sys
 import time
 
 import numpy as np
 
-from mesh_tools import ROOT, SIZES, armadillo, blender_mesh
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
+
+from bench.meshes import ROOT, SIZES, armadillo, blender_mesh
 
 import bpy
 from mathutils import Matrix, Vector
 
 from skin_detach_addon import api
-from skin_detach_addon.blender import binding, mesh_io
-from skin_detach_addon.core.bend_scenario import bend_scenario
+from bench.scenario import bend_scenario
 
 
 def drag(obj, handle, scenario, steps):
@@ -45,7 +47,9 @@ def render(obj, rest, proxy, path, labels, pixels=1800):
     """Original (rest), proxy and result side by side, seen from the front along the bend's
     rotation axis; Workbench, or Cycles on the CPU where there is no OpenGL."""
     scene = bpy.context.scene
-    deformed = mesh_io.read_positions(obj.data)
+    deformed = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+    obj.data.vertices.foreach_get("co", deformed)
+    deformed = deformed.reshape(-1, 3).astype(np.float64)
     extent = rest.max(axis=0) - rest.min(axis=0)
     longest, middle, shortest = np.argsort(extent)[::-1]
     look = Vector([-1.0 if i == shortest else 0.0 for i in range(3)])  # towards the armadillo's face
@@ -57,7 +61,8 @@ def render(obj, rest, proxy, path, labels, pixels=1800):
 
     original = obj.copy()
     original.data = obj.data.copy()
-    mesh_io.write_positions(original.data, rest)
+    original.data.vertices.foreach_set("co", rest.astype(np.float32).ravel())
+    original.data.update()
     cage = bpy.data.objects.new("proxy_view", proxy.data.copy())
     wire = bpy.data.objects.new("proxy_wire", cage.data)
     for item in (original, cage, wire):
@@ -161,9 +166,9 @@ def main():
     bpy.ops.wm.save_as_mainfile(filepath=str(out / "demo.blend"), copy=True)
     obj_file = api.bake(obj, [bpy.context.scene.frame_current], into=api.FILES,
                         path=str(out / "armadillo_deformed_####.obj"))[0]["output"]
-    rest = np.asarray(obj[binding.KEY]["rest"], dtype=np.float64).reshape(-1, 3)
+    rest = api.rest_positions(obj).astype(np.float64)
     start = time.perf_counter()
-    engine = render(obj, rest, binding.proxy_of(obj), out / "demo.png", [
+    engine = render(obj, rest, api.proxy_of(obj), out / "demo.png", [
         f"original: {points.shape[0]:,} vertices", f"proxy: {stats['proxy_faces']:,} faces",
         f"result: {median:.0f} ms per drag step"], args.width)
     print(f"render: {engine}, {time.perf_counter() - start:.1f} s")

@@ -22,15 +22,21 @@ from .blender import baking, handles, mesh_io, skin_rig
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
+from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession
 from .core.errors import SkinDetachError
 from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
-           "is_bound", "handles_of", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL", "SETTLE_TOL"]
+           "is_bound", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
+           "remove_handle", "rest_positions", "figures", "bound_objects", "selected_vertices", "check_output_file", "DragSession",
+           "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL", "SETTLE_TOL",
+           "RUNNING", "FINISHED", "CANCELLED"]
+
+HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
 
 
 def _owner(obj):
-    owner = skin_rig.owner_of(obj)
+    owner = skin_rig.mesh_of(obj)
     if owner is None:
         raise SkinDetachError("obj: expected a mesh object, got None")
     return owner
@@ -95,17 +101,12 @@ def deform(obj, preserve_volume=True, tol=SETTLE_TOL):
     import bpy
     obj = _bound(obj)
     bpy.context.view_layer.update()  # world matrices of handles moved by a script
-    deformation = Deformation(obj, preserve_volume)
-    stored.check_unedited(obj)
-    report = deformation.step(tol)
-    stored.mark_written(obj, report.positions)
-    return {"milliseconds": report.milliseconds, "iterations": report.iterations, "converged": report.converged,
-            "volume_change": report.volume_change}
+    return Deformation(obj, preserve_volume).step(tol).figures()
 
 
 def reset(obj):
     """Put the mesh and proxy back to the bound rest shape (bit-exact) and every handle back at rest."""
-    Deformation(_bound(obj)).reset()
+    Deformation(_bound(obj), require_unedited=False).reset()
 
 
 def clear(obj):
@@ -125,10 +126,83 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
 
 def is_bound(obj):
     """True when ``obj`` (or the mesh it belongs to) carries a Skin Detach binding."""
-    return stored.has_binding(skin_rig.owner_of(obj))
+    return stored.has_binding(skin_rig.mesh_of(obj))
+
+
+def mesh_of(obj):
+    """The mesh object ``obj`` stands for: the bound mesh of a proxy or handle, else ``obj`` itself (or None)."""
+    return skin_rig.mesh_of(obj)
 
 
 def handles_of(obj):
-    """The handle and anchor empties of ``obj``, sorted by name."""
-    return handles.handles_of(_bound(obj))
+    """The handle and anchor empties of ``obj`` (bound or not, e.g. a file whose binding was
+    lost), sorted by name; later names win where they share proxy vertices."""
+    owner = _owner(obj)
+    return handles.handles_of(owner, stored.proxy_of(owner))
+
+
+def is_handle(obj):
+    """True when ``obj`` is a Skin Detach handle or anchor empty."""
+    return handles.is_handle(obj)
+
+
+def handle_kind(empty):
+    """:data:`HANDLE` or :data:`ANCHOR` for a handle or anchor empty."""
+    _check_handle(empty)
+    return handles.kind_of(empty)
+
+
+def handle_vertex_count(empty):
+    """How many proxy vertices a handle or anchor empty holds."""
+    _check_handle(empty)
+    return int(handles.proxy_ids_of(empty).size)
+
+
+def remove_handle(empty):
+    """Delete a handle or anchor empty."""
+    _check_handle(empty)
+    handles.remove(empty)
+
+
+def _check_handle(empty):
+    if not handles.is_handle(empty):
+        raise SkinDetachError(f"empty: expected a Skin Detach handle or anchor, got "
+                              f"{'nothing' if empty is None else repr(empty.name)}")
+
+
+def proxy_of(obj):
+    """The proxy object of the bound mesh ``obj`` stands for, or None."""
+    return stored.proxy_of(skin_rig.mesh_of(obj))
+
+
+def rest_positions(obj):
+    """(n, 3) float32 rest positions the mesh was bound with, in its vertex order."""
+    return stored.rest_positions(_bound(obj)).copy()
+
+
+def figures(obj):
+    """What the panel shows for the mesh ``obj`` stands for: the build figures (dict, see
+    :func:`build`) under "build" and the last step in this session under "last_step" (dict as
+    returned by :func:`deform`, or None)."""
+    obj = _bound(obj)
+    return {"build": stored.stats_of(obj), "last_step": stored.last_step(obj)}
+
+
+def bound_objects(objects=None):
+    """The bound mesh objects among ``objects`` (default: every object in the file)."""
+    import bpy
+    return [o for o in (bpy.data.objects if objects is None else objects) if stored.has_binding(o)]
+
+
+def selected_vertices(context):
+    """The bound mesh behind the active object and the vertices selected on the active object
+    (the mesh's Edit Mode selection, Edit Mode left first, or its proxy's): (obj, vertex ids (k,),
+    on_proxy)."""
+    return skin_rig.selection(context)
+
+
+def check_output_file(argument, path):
+    """Raise unless the folder of file ``path`` exists (or can be made) and is writable, as is
+    ``path`` itself if it exists; ``argument`` names it in the message."""
+    baking.check_folder(argument, path)
 

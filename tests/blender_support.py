@@ -70,7 +70,7 @@ def rig(obj, target_faces=300, axis=2):
     assert bpy.ops.skin_detach.add_anchor() == {'FINISHED'}
     select_vertices(obj, band(obj, 0.85, 1.0, axis))
     assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
-    handle = [e for e in handles.handles_of(obj) if e[handles.TAG]["kind"] == handles.HANDLE][0]
+    handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
     return handle
 
 

@@ -6,7 +6,7 @@ import tempfile
 import numpy as np
 import pytest
 
-from skin_detach_addon.core.obj_io import read_obj
+from bench.meshes import read_obj
 
 DATA = pathlib.Path(__file__).parent / "data"
 
@@ -44,7 +44,7 @@ def scene():
     """Fresh empty scene with the add-on registered (headless bpy)."""
     bpy = pytest.importorskip("bpy")
     import skin_detach_addon
-    from skin_detach_addon.blender import live_update
+    from skin_detach_addon.ui import live_update
     if not hasattr(bpy.types.Scene, "skin_detach"):
         skin_detach_addon.register()
     bpy.ops.wm.read_homefile(use_empty=True)

@@ -130,7 +130,7 @@ def test_bake_objects_and_files_keep_uvs_and_vertex_order(scene, tmp_path):
     baked_positions = mesh_io.read_positions(baked.data).copy()
     assert np.abs(baked_positions - mesh_io.read_positions(obj.data)).max() > 0.1
     api.bake(obj, "2", into=api.OBJECTS)
-    assert len(bpy.data.collections[baking.COLLECTION].objects) == 1
+    assert len(bpy.data.collections[baking.BAKE_COLLECTION].objects) == 1
 
     records = api.bake(obj, "1-2", into=api.FILES, path=str(tmp_path / "frames" / "sphere_##.obj"))
     assert [r["output"] for r in records] == [str(tmp_path / "frames" / f"sphere_0{f}.obj") for f in (1, 2)]
@@ -160,8 +160,8 @@ def test_failed_bake_removes_what_it_added_and_leaves_the_mesh(scene, tmp_path):
     for into, path in ((api.SHAPE_KEYS, None), (api.OBJECTS, None), (api.FILES, str(tmp_path / "m.obj"))):
         with pytest.raises(KeyboardInterrupt):
             api.bake(obj, "1-3", into=into, path=path, progress=interrupt)
-        assert obj.data.shape_keys is None and baking.COLLECTION not in bpy.data.collections or \
-            not bpy.data.collections[baking.COLLECTION].objects
+        assert obj.data.shape_keys is None and baking.BAKE_COLLECTION not in bpy.data.collections or \
+            not bpy.data.collections[baking.BAKE_COLLECTION].objects
         assert np.array_equal(mesh_io.snapshot(obj.data)[0], before[0]) and scene.frame_current == 3
     api.deform(obj)  # what Skin Detach wrote is still recognised as its own
     with pytest.raises(SkinDetachError, match="path"):

@@ -8,14 +8,15 @@ bpy = pytest.importorskip("bpy")
 from blender_support import TopView, activate, band, import_spot, rig  # noqa: E402
 
 import skin_detach_addon  # noqa: E402
-from skin_detach_addon.blender import binding, live_update, mesh_io  # noqa: E402
+from skin_detach_addon.blender import binding, mesh_io  # noqa: E402
+from skin_detach_addon.ui import live_update  # noqa: E402
 from skin_detach_addon.blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession  # noqa: E402
 
 
 def _state(obj):
     proxy = binding.proxy_of(obj)
     return (mesh_io.snapshot(obj.data)[0], mesh_io.snapshot(proxy.data)[0],
-            [np.array(child.matrix_basis) for child in proxy.children], obj[binding.KEY]["written_digest"])
+            [np.array(child.matrix_basis) for child in proxy.children], binding.written_digest(obj))
 
 
 def _same(a, b):

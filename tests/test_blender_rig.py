@@ -17,7 +17,7 @@ def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(
     proxy = binding.proxy_of(obj)
     assert proxy.name == "spot_proxy" and proxy.parent == obj
     assert proxy.display_type == 'WIRE' and proxy.hide_render
-    assert [c.name for c in proxy.users_collection] == [skin_rig.COLLECTION]
+    assert [c.name for c in proxy.users_collection] == [skin_rig.RIG_COLLECTION]
     assert np.allclose(np.array(proxy.matrix_world), np.array(obj.matrix_world))
     assert 300 <= len(proxy.data.polygons) <= 400
     stats = binding.stats_of(obj)
@@ -36,9 +36,22 @@ def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(
     assert len(bpy.data.meshes) == 2
     kept = handles.handles_of(obj)
     # The handle made from detail vertices follows to the new proxy; the proxy-made anchor cannot.
-    assert [e[handles.TAG]["kind"] for e in kept] == [handles.HANDLE]
+    assert [handles.kind_of(e) for e in kept] == [handles.HANDLE]
     assert kept[0].parent == proxies[0]
-    assert np.asarray(kept[0][handles.TAG]["proxy_ids"]).max() < len(proxies[0].data.vertices)
+    assert handles.proxy_ids_of(kept[0]).max() < len(proxies[0].data.vertices)
+
+
+def test_build_operator_takes_its_own_parameters_with_the_panel_values_as_defaults(scene):
+    obj = import_spot()
+    scene.skin_detach.target_faces = 1000
+    scene.skin_detach.normal_test = False
+    assert bpy.ops.skin_detach.build(target_faces=200) == {'FINISHED'}
+    assert len(binding.proxy_of(obj).data.polygons) == 200  # no normal test: exactly the target
+    assert scene.skin_detach.target_faces == 1000            # the panel's value stays
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    assert len(binding.proxy_of(obj).data.polygons) == 1000
+    assert bpy.ops.skin_detach.build(target_faces=300, normal_test=True) == {'FINISHED'}
+    assert 300 <= len(binding.proxy_of(obj).data.polygons) < 400
 
 
 def test_binding_is_stored_without_int64_or_pickles(scene):
@@ -67,7 +80,7 @@ def test_add_handle_leaves_edit_mode_and_uses_the_edit_selection(scene):
     assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
     assert obj.mode == 'OBJECT'
     empty = handles.handles_of(obj)[-1]
-    assert np.array_equal(np.asarray(empty[handles.TAG]["detail_ids"]), np.arange(20))
+    assert np.array_equal(handles.detail_ids_of(empty), np.arange(20))
 
 
 def test_apply_moves_the_handle_rigidly_keeps_anchors_and_reset_is_exact(scene):
@@ -87,7 +100,7 @@ def test_apply_moves_the_handle_rigidly_keeps_anchors_and_reset_is_exact(scene):
     assert bpy.ops.skin_detach.reset() == {'FINISHED'}
     assert np.array_equal(mesh_io.read_positions(obj.data), rest)
     assert np.allclose(np.array(handle.matrix_basis)[:3, 3],
-                       np.asarray(handle[handles.TAG]["rest_local"]).reshape(4, 4)[:3, 3])
+                       handles.rest_local_of(handle)[:3, 3])
 
 
 def test_thousands_of_applies_do_not_drift(scene):
@@ -114,7 +127,7 @@ def test_clear_removes_proxy_handles_binding_and_collection(scene):
     assert bpy.ops.skin_detach.clear() == {'FINISHED'}
     assert binding.KEY not in obj
     assert [o.name for o in bpy.data.objects] == [obj.name]
-    assert skin_rig.COLLECTION not in bpy.data.collections
+    assert skin_rig.RIG_COLLECTION not in bpy.data.collections
     assert np.array_equal(mesh_io.read_positions(obj.data), shape)
 
 
@@ -131,7 +144,7 @@ def test_save_reload_then_apply_without_rebuilding(scene, tmp_path):
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.wm.open_mainfile(filepath=str(path))
     obj = bpy.data.objects["spot"]
-    handle = [e for e in handles.handles_of(obj) if e[handles.TAG]["kind"] == handles.HANDLE][0]
+    handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
     activate(handle)
     handle.location.x += 0.15
     assert bpy.ops.skin_detach.apply() == {'FINISHED'}
@@ -239,7 +252,7 @@ class _Layout:
 
 
 def _draw_panel():
-    from skin_detach_addon.blender.panel import VIEW3D_PT_skin_detach
+    from skin_detach_addon.ui.panel import VIEW3D_PT_skin_detach
     lines = []
     VIEW3D_PT_skin_detach.draw(type("Panel", (), {"layout": _Layout(lines)})(), bpy.context)
     return lines

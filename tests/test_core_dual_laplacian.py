@@ -9,8 +9,8 @@ import pytest
 from conftest import diagonal
 from shapes import box, cylinder, merge, plane, random_rotation
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError, deform_proxy
-from skin_detach_addon.core.bend_scenario import bend_scenario
-from skin_detach_addon.core.quality import edge_distortion
+from bench.scenario import bend_scenario
+from bench.quality import edge_distortion
 
 
 @pytest.fixture(scope="module")

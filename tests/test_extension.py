@@ -21,7 +21,8 @@ import bpy
 bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
 assert "bl_ext.user_default.skin_detach_addon" in sys.modules, "extension not enabled"
 assert "skin_detach_addon" not in sys.modules, "the repository copy was imported"
-site = os.path.join(bpy.utils.user_resource("EXTENSIONS"), ".local", "lib", "python3.11", "site-packages")
+site = os.path.join(bpy.utils.user_resource("EXTENSIONS"), ".local", "lib",
+                    "python%d.%d" % sys.version_info[:2], "site-packages")
 for package in ("scipy", "fast_simplification"):
     assert os.path.isdir(os.path.join(site, package)), f"{package} wheel not installed in {site}"
 

@@ -1,22 +1,5 @@
-"""Everything that touches bpy: operators, panel, settings, handlers. Only
-:func:`register` and :func:`unregister` are meant to be called from outside."""
-
-import bpy
-
-from . import live_update, operators, panel, properties
-
-CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES
-
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-    properties.register()
-    live_update.register()
-
-
-def unregister():
-    live_update.unregister()
-    properties.unregister()
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+"""Blender services under the scripting API: arrays in and out of meshes (``mesh_io``), the
+stored binding (``binding``), handles (``handles``), the rig (``skin_rig``), one deformation
+step (``deformation``), the drag as a plain object (``drag_session``) and baking (``baking``).
+They import ``core`` and bpy, never ``api`` or ``ui``; this file imports nothing, so importing
+one of them loads no UI class."""

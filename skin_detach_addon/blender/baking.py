@@ -25,7 +25,7 @@ MODES = (SHAPE_KEYS, OBJECTS, FILES)
 #: Baked shape keys are named ``skin_detach_0012`` (the frame number, zero-padded).
 KEY_PREFIX = "skin_detach_"
 #: Baked objects go into this collection, tagged with ``{"owner": obj, "frame": f}``.
-COLLECTION = "Skin Detach Bake"
+BAKE_COLLECTION = "Skin Detach Bake"
 BAKE_TAG = "_skin_detach_bake"
 FORMATS = (".obj", ".ply")
 
@@ -117,16 +117,15 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     if obj.name not in scene.objects:
         raise SkinDetachError(f"object {obj.name!r}: expected it in the current scene {scene.name!r}, it is not")
     deformation = Deformation(obj, preserve_volume)
-    stored.check_unedited(obj)
     saved_frame = (scene.frame_current, scene.frame_subframe)
-    saved_mesh = mesh_io.snapshot(obj.data)
+    saved = deformation.snapshot()
     writer = {SHAPE_KEYS: _ShapeKeyWriter, OBJECTS: _ObjectWriter, FILES: _FileWriter}[into](obj, path, apply_modifiers)
     records = []
     try:
         for frame in frames:
             scene.frame_set(frame)
             start = time.perf_counter()
-            result, detail, _ = deformation.solve()
+            result, detail = deformation.solve()
             milliseconds = 1000 * (time.perf_counter() - start)
             records.append({"frame": frame, "milliseconds": milliseconds, "iterations": result.iterations,
                             "converged": result.converged, "volume_change": result.volume_change,
@@ -137,12 +136,16 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
         writer.undo()
         raise
     finally:
-        mesh_io.restore(obj.data, saved_mesh)
+        deformation.restore(saved)
         scene.frame_set(saved_frame[0], subframe=saved_frame[1])
     return records
 
 
 class _ShapeKeyWriter:
+    """Bake writer into shape keys of the mesh. Every writer has ``write(frame, detail (n, 3)
+    float32 positions in the mesh's vertex order) -> output name`` and ``undo()``, which removes
+    what it made."""
+
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
         self.made = []
@@ -190,10 +193,13 @@ def _fcurves(id_data):
 
 
 class _ObjectWriter:
+    """Bake writer into one object per frame (a copy of the mesh object with (n, 3) positions
+    ``detail``), see :class:`_ShapeKeyWriter` for the interface."""
+
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
         self.made = []
-        self.collection = skin_rig.scene_collection(COLLECTION)
+        self.collection = skin_rig.scene_collection(BAKE_COLLECTION)
 
     def write(self, frame, detail):
         baked = next((o for o in self.collection.objects if BAKE_TAG in o and o[BAKE_TAG].get("owner") == self.obj
@@ -201,9 +207,9 @@ class _ObjectWriter:
         if baked is None:
             baked = self.obj.copy()
             baked.data = self.obj.data.copy()
-            for key in (stored.KEY, BAKE_TAG):
-                if key in baked:
-                    del baked[key]
+            stored.strip_copy(baked)
+            if BAKE_TAG in baked:
+                del baked[BAKE_TAG]
             baked.name = f"{self.obj.name}_bake_{frame:04d}"
             baked.parent = None
             baked.animation_data_clear()
@@ -223,6 +229,9 @@ class _ObjectWriter:
 
 
 class _FileWriter:
+    """Bake writer into one OBJ or PLY file per frame: ``detail`` (n, 3) is written into the
+    mesh (restored when the bake ends) and exported; see :class:`_ShapeKeyWriter` for the interface."""
+
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
         self.pattern = path

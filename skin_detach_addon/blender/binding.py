@@ -38,6 +38,8 @@ class Binding:
         self.proxy = proxy
         self._solvers = {}
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
+        #: Figures of the last step in this session (dict, see StepReport.figures), or None.
+        self.last_step = None
 
     def solve_proxy(self, ids, targets, preserve_volume, tol):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
@@ -121,8 +123,7 @@ def open_binding(obj):
         arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
                   for key, value in props.items() if key != "proxy"}
         surface = SkinDetachedSurface.from_arrays(arrays, source=f"binding of {obj.name!r}")
-        binding = Binding(props["binding_id"], surface, np.asarray(props["rest"], dtype=np.float32).reshape(-1, 3),
-                          proxy)
+        binding = Binding(props["binding_id"], surface, rest_positions(obj), proxy)
         _CACHE[binding.binding_id] = binding
     binding.proxy = proxy  # never keep a Blender reference across undo or reload
     return binding
@@ -149,7 +150,32 @@ def check_unedited(obj):
 
 def mark_written(obj, positions):
     """Record the digest of the (n, 3) positions just written."""
-    obj[KEY]["written_digest"] = mesh_io.positions_digest(positions)
+    set_written_digest(obj, mesh_io.positions_digest(positions))
+
+
+def written_digest(obj):
+    """The digest of the positions Skin Detach last wrote into ``obj``'s mesh."""
+    return obj[KEY].get("written_digest")
+
+
+def set_written_digest(obj, digest):
+    obj[KEY]["written_digest"] = digest
+
+
+def rest_positions(obj):
+    """(n, 3) float32 rest positions ``obj`` was bound with, in its mesh's vertex order."""
+    return np.asarray(obj[KEY]["rest"], dtype=np.float32).reshape(-1, 3)
+
+
+def binding_id(obj):
+    """The id of ``obj``'s binding (changes with every Build), or None without one."""
+    return obj[KEY].get("binding_id") if has_binding(obj) else None
+
+
+def last_step(obj):
+    """Figures of the last step of ``obj``'s binding in this session (dict), or None."""
+    binding = _CACHE.get(binding_id(obj))
+    return None if binding is None else binding.last_step
 
 
 def stats_of(obj):
@@ -161,6 +187,13 @@ def forget(obj):
     """Remove the stored binding of ``obj`` (the caller removes proxy and handles)."""
     if KEY in obj:
         _CACHE.pop(obj[KEY].get("binding_id"), None)
+        del obj[KEY]
+
+
+def strip_copy(obj):
+    """Delete the stored binding properties from ``obj``, a copy of a bound object (the original's
+    runtime cache stays)."""
+    if KEY in obj:
         del obj[KEY]
 
 

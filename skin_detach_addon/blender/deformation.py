@@ -1,4 +1,6 @@
-"""One deformation step of a bound object: handles -> proxy solve -> detail rebuild -> write-back.
+"""The one owner of "open, check unedited, step, mark written" for a bound mesh object:
+handles -> proxy solve -> detail rebuild -> write-back, and the exact way back (snapshot,
+restore, reset).
 
 Every step starts from the stored rest (the solve targets are rigid motions of rest proxy
 positions and the rebuild reads only the solved proxy), so thousands of steps do not drift.
@@ -8,46 +10,54 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from . import binding as stored
 from . import handles, mesh_io
 
-#: Tolerance of the normal-update iteration while the mouse moves (the API default) ...
+#: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL) ...
 DRAG_TOL = 1e-6
-#: ... and when a result is kept (Apply, live update, confirm): tight enough that the result
-#: does not depend on where the warm start came from.
+#: ... and when a result is kept (Apply, live update, confirm, bake): tight enough that the
+#: result does not depend on where the warm start came from.
 SETTLE_TOL = 1e-12
-#: Last step per binding id, for the panel (runtime only, never saved).
-LAST_STEP = {}
 
 
 @dataclass
 class StepReport:
+    """One solve and write: milliseconds (solve + rebuild + write), iterations, converged,
+    volume_change (of the proxy, nan without closed components), positions (n, 3) float32 as
+    written (a buffer the next step reuses)."""
+
     milliseconds: float
     iterations: int
     converged: bool
     volume_change: float
-    positions: np.ndarray  # (n, 3) float32 as written; a buffer the next step reuses
+    positions: np.ndarray
+
+    def figures(self):
+        """The report without the positions, as a plain dict."""
+        return {"milliseconds": self.milliseconds, "iterations": self.iterations, "converged": self.converged,
+                "volume_change": self.volume_change}
 
 
-def handle_signature(obj, proxy, empties=None):
-    """Tuple of the object's world matrix, the proxy's and every handle's own (basis) matrix:
-    changes when any of them moves, by any means, and is current as soon as it is set.
-    ``empties``: the handles of ``obj`` when the caller has them already."""
-    values = [tuple(v for col in obj.matrix_world.col for v in col),
-              tuple(v for col in proxy.matrix_basis.col for v in col)]
-    for empty in handles.handles_of(obj, proxy) if empties is None else empties:
-        values.append((empty.name,) + tuple(v for col in empty.matrix_basis.col for v in col))
-    return tuple(values)
+@dataclass
+class Snapshot:
+    """What a step may change, saved bit for bit: the mesh and proxy positions (and shape keys,
+    see :func:`mesh_io.snapshot`), every handle's basis matrix by name, and the written digest."""
+
+    mesh: tuple
+    proxy: tuple
+    matrices: dict
+    digest: str
 
 
 class Deformation:
-    """Drives one bound mesh object. Opening checks the binding (topology, proxy, Object Mode);
-    :meth:`step` then solves from the current handle transforms and writes the result."""
+    """Drives one bound mesh object ``obj``. Opening checks the binding (topology, proxy, Object
+    Mode) and, unless ``require_unedited`` is False (Reset), that the mesh holds what Skin Detach
+    last wrote; :meth:`step` then solves from the current handle transforms and writes all of
+    its objects."""
 
-    def __init__(self, obj, preserve_volume=True):
+    def __init__(self, obj, preserve_volume=True, require_unedited=True):
         self.obj = obj
         self.binding = stored.open_binding(obj)
         self.preserve_volume = bool(preserve_volume)
@@ -56,59 +66,59 @@ class Deformation:
         if len(self.proxy.data.vertices) != m:
             raise SkinDetachError(f"proxy {self.proxy.name!r}: expected {m} vertices, got "
                                   f"{len(self.proxy.data.vertices)} (its mesh was edited); press Rebuild")
+        if require_unedited:
+            stored.check_unedited(obj)
+
+    def handles(self):
+        """The handle and anchor empties of the object, sorted by name."""
+        return handles.handles_of(self.obj, self.proxy)
 
     def solve(self, tol=SETTLE_TOL):
         """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
-        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)), the (n, 3) float32 detail
-        positions (a buffer the next call reuses) and the handle empties it read."""
-        empties = handles.handles_of(self.obj, self.proxy)
-        ids, targets = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
+        positions (a buffer the next call reuses)."""
+        ids, targets = handles.constraints(self.obj, self.handles(), self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
-        return result, self.binding.rebuild(result.vertices), empties
+        return result, self.binding.rebuild(result.vertices)
 
     def step(self, tol=SETTLE_TOL):
-        """:meth:`solve`, then write the mesh and the proxy; returns a :class:`StepReport`."""
+        """:meth:`solve`, then write the mesh and the proxy and record the written digest and
+        the step's figures on the binding; returns a :class:`StepReport`."""
         start = time.perf_counter()
-        result, detail, empties = self.solve(tol)
-        mesh_io.write_positions(self.obj.data, detail)
-        mesh_io.write_positions(self.proxy.data, result.vertices)
+        result, detail = self.solve(tol)
+        self._write(detail, result.vertices)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
-        LAST_STEP[self.binding.binding_id] = (report.milliseconds, handle_signature(self.obj, self.proxy, empties))
+        self.binding.last_step = report.figures()
         return report
+
+    def _write(self, detail, proxy_positions):
+        mesh_io.write_positions(self.obj.data, detail)
+        mesh_io.write_positions(self.proxy.data, proxy_positions)
+        stored.mark_written(self.obj, detail)
+
+    def snapshot(self):
+        """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change."""
+        return Snapshot(mesh_io.snapshot(self.obj.data), mesh_io.snapshot(self.proxy.data),
+                        {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_digest(self.obj))
+
+    def restore(self, saved):
+        """Everything back bit for bit from a :meth:`snapshot`: empties, mesh (and shape keys),
+        proxy, written digest; warm starts are dropped."""
+        for empty in self.handles():
+            if empty.name in saved.matrices:
+                empty.matrix_basis = saved.matrices[empty.name]
+        mesh_io.restore(self.obj.data, saved.mesh)
+        mesh_io.restore(self.proxy.data, saved.proxy)
+        stored.set_written_digest(self.obj, saved.digest)
+        self.binding.forget_warm_starts()
 
     def reset(self):
         """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame."""
-        for empty in handles.handles_of(self.obj, self.proxy):
-            rest_local = np.asarray(empty[handles.TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
-            empty.matrix_basis = Matrix(rest_local.tolist())
-        mesh_io.write_positions(self.obj.data, self.binding.rest)
-        mesh_io.write_positions(self.proxy.data, self.binding.surface.proxy_vertices)
-        stored.mark_written(self.obj, self.binding.rest)
+        for empty in self.handles():
+            handles.put_at_rest(empty)
+        self._write(self.binding.rest, self.binding.surface.proxy_vertices)
         self.binding.forget_warm_starts()
-        remember_handles(self.obj, self.proxy)
-
-
-def last_step_ms(obj):
-    """Milliseconds of the last step of ``obj``'s binding in this session, or None."""
-    if not stored.has_binding(obj):
-        return None
-    entry = LAST_STEP.get(obj[stored.KEY].get("binding_id"))
-    return None if entry is None else entry[0]
-
-
-def remember_handles(obj, proxy):
-    """Take the handles' current transforms as solved (after a cancel put them back)."""
-    key = obj[stored.KEY].get("binding_id")
-    milliseconds = LAST_STEP[key][0] if key in LAST_STEP else 0.0
-    LAST_STEP[key] = (milliseconds, handle_signature(obj, proxy))
-
-
-def solved_signature(obj):
-    if not stored.has_binding(obj):
-        return None
-    entry = LAST_STEP.get(obj[stored.KEY].get("binding_id"))
-    return None if entry is None else entry[1]

@@ -2,42 +2,20 @@
 
 A view maps the mouse to the world: ``view.to_world(mouse (2,), depth_point (3,)) -> (3,)``
 on the plane through ``depth_point`` facing the viewer, ``view.to_screen(point (3,)) -> (2,)``
-and ``view.direction`` (3,), the unit direction the view looks along. :class:`RegionView`
-wraps a 3D View region; tests pass their own.
+and ``view.direction`` (3,), the unit direction the view looks along. The UI wraps a 3D View
+region (``ui.region_view.RegionView``); tests pass their own.
 """
 
 import math
 
 from mathutils import Matrix, Vector
 
-from . import binding as stored
-from . import mesh_io
-from .deformation import DRAG_TOL, Deformation, remember_handles
+from .deformation import DRAG_TOL, Deformation
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
 _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
 _CONFIRM = {"LEFTMOUSE", "RET", "NUMPAD_ENTER"}
 _CANCEL = {"RIGHTMOUSE", "ESC"}
-
-
-class RegionView:
-    """The view of a 3D View region (``context.region``, ``context.region_data``)."""
-
-    def __init__(self, region, region_data):
-        self.region, self.region_data = region, region_data
-
-    def to_world(self, mouse, depth_point):
-        from bpy_extras.view3d_utils import region_2d_to_location_3d
-        return region_2d_to_location_3d(self.region, self.region_data, Vector(mouse), Vector(depth_point))
-
-    def to_screen(self, point):
-        from bpy_extras.view3d_utils import location_3d_to_region_2d
-        screen = location_3d_to_region_2d(self.region, self.region_data, Vector(point))
-        return Vector((0.0, 0.0)) if screen is None else screen
-
-    @property
-    def direction(self):
-        return (self.region_data.view_rotation @ Vector((0.0, 0.0, -1.0))).normalized()
 
 
 class DragSession:
@@ -51,12 +29,7 @@ class DragSession:
     def __init__(self, obj, empty, view, mouse, preserve_volume=True):
         self.obj, self.empty, self.view = obj, empty, view
         self.deformation = Deformation(obj, preserve_volume)
-        stored.check_unedited(obj)
-        proxy = self.deformation.proxy
-        self._saved_mesh = mesh_io.snapshot(obj.data)
-        self._saved_proxy = mesh_io.snapshot(proxy.data)
-        self._saved_matrices = {e.name: e.matrix_basis.copy() for e in proxy.children}
-        self._saved_digest = obj[stored.KEY]["written_digest"]
+        self._saved = self.deformation.snapshot()
         self.start = empty.matrix_world.copy()
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
@@ -129,18 +102,9 @@ class DragSession:
         """Keep the result, settled to the tight tolerance so it does not depend on the path."""
         if self.last is not None:
             self.last = self.deformation.step()
-            stored.mark_written(self.obj, self.last.positions)
         return FINISHED
 
     def cancel(self):
         """Everything back bit for bit: empties, mesh (and shape keys), proxy, stored digest."""
-        proxy = self.deformation.proxy
-        for child in proxy.children:
-            if child.name in self._saved_matrices:
-                child.matrix_basis = self._saved_matrices[child.name]
-        mesh_io.restore(self.obj.data, self._saved_mesh)
-        mesh_io.restore(proxy.data, self._saved_proxy)
-        self.obj[stored.KEY]["written_digest"] = self._saved_digest
-        self.deformation.binding.forget_warm_starts()
-        remember_handles(self.obj, proxy)
+        self.deformation.restore(self._saved)
         return CANCELLED

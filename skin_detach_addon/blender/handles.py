@@ -22,8 +22,34 @@ def is_handle(obj):
     return obj is not None and obj.type == 'EMPTY' and TAG in obj
 
 
-def owner_of(empty):
+def owner(empty):
+    """The bound mesh object a handle or anchor empty belongs to (None if it is none)."""
     return empty[TAG].get("owner") if is_handle(empty) else None
+
+
+def kind_of(empty):
+    """HANDLE or ANCHOR."""
+    return empty[TAG]["kind"]
+
+
+def proxy_ids_of(empty):
+    """(c,) int64 proxy vertex ids the empty holds."""
+    return np.asarray(empty[TAG]["proxy_ids"], dtype=np.int64)
+
+
+def detail_ids_of(empty):
+    """(k,) int64 detail vertex ids the empty was made from (empty when made from the proxy)."""
+    return np.asarray(empty[TAG]["detail_ids"], dtype=np.int64)
+
+
+def rest_local_of(empty):
+    """(4, 4) float64 rest frame of the empty in the bound object's local space."""
+    return np.asarray(empty[TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
+
+
+def put_at_rest(empty):
+    """The empty back at its rest frame."""
+    empty.matrix_basis = Matrix(rest_local_of(empty).tolist())
 
 
 def handles_of(obj, proxy=None):
@@ -100,8 +126,7 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
 def local_motion(obj, empty):
     """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made."""
     world = np.array(obj.matrix_world, dtype=np.float64)
-    rest_local = np.asarray(empty[TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
-    return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ np.linalg.inv(rest_local)
+    return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ np.linalg.inv(rest_local_of(empty))
 
 
 def constraints(obj, empties, rest_proxy):
@@ -111,12 +136,12 @@ def constraints(obj, empties, rest_proxy):
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
-    for empty in sorted(empties, key=lambda e: e[TAG]["kind"] == HANDLE):
-        ids = np.asarray(empty[TAG]["proxy_ids"], dtype=np.int64)
+    for empty in sorted(empties, key=lambda e: kind_of(e) == HANDLE):
+        ids = proxy_ids_of(empty)
         if ids.size == 0 or ids.max() >= m:
             raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids below {m}, "
                                   f"got {ids.max() if ids.size else 'none'}; remove it or Rebuild")
-        if empty[TAG]["kind"] == HANDLE:
+        if kind_of(empty) == HANDLE:
             motion = local_motion(obj, empty)
             if not np.isfinite(motion).all():
                 raise SkinDetachError(f"handle {empty.name!r}: expected an invertible transform, got a degenerate one")

@@ -11,7 +11,7 @@ from ..core.surface import SkinDetachedSurface
 from . import binding as stored
 from . import handles, mesh_io
 
-COLLECTION = "Skin Detach"
+RIG_COLLECTION = "Skin Detach"
 PROXY_TAG = "_skin_detach_proxy_of"
 
 
@@ -29,12 +29,12 @@ def check_mesh_object(obj):
                               f"{len(obj.data.vertices)} vertices and {len(obj.data.polygons)} faces")
 
 
-def owner_of(obj):
-    """The bound mesh object that ``obj`` belongs to (itself, its proxy's owner or its handle's owner)."""
+def mesh_of(obj):
+    """The detail mesh object that ``obj`` stands for: its proxy's or handle's mesh, else ``obj`` itself."""
     if obj is None:
         return None
     if handles.is_handle(obj):
-        return handles.owner_of(obj)
+        return handles.owner(obj)
     if PROXY_TAG in obj:
         return obj[PROXY_TAG]
     return obj
@@ -57,7 +57,7 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     stored.store(obj, surface, positions, proxy)
     kept = removed = 0
     for empty in old:
-        detail = np.asarray(empty[handles.TAG]["detail_ids"], dtype=np.int64)
+        detail = handles.detail_ids_of(empty)
         if detail.size and detail.max() < surface.n_detail:
             ids = surface.proxy_vertices_for(detail)
             handles.rebind(empty, proxy, ids, surface.proxy_vertices[ids].mean(axis=0))
@@ -83,7 +83,7 @@ def _make_proxy(obj, surface):
     mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
     mesh.update()
     proxy = bpy.data.objects.new(name, mesh)
-    scene_collection(COLLECTION).objects.link(proxy)
+    scene_collection(RIG_COLLECTION).objects.link(proxy)
     proxy.parent = obj
     proxy.matrix_parent_inverse = Matrix.Identity(4)
     proxy.matrix_basis = Matrix.Identity(4)
@@ -132,7 +132,7 @@ def selection(context):
     current) or its proxy. Returns (obj, vertex ids (k,), whether they are proxy vertices)."""
     import bpy
     active = context.active_object
-    obj = owner_of(active)
+    obj = mesh_of(active)
     if obj is None or not stored.has_binding(obj):
         raise SkinDetachError(f"object: expected a bound mesh or its proxy, got {_name(active)}; press Build first")
     if active.mode == 'EDIT':
@@ -157,7 +157,7 @@ def clear(obj):
         handles.remove(empty)
     _remove_proxy(obj)
     stored.forget(obj)
-    collection = bpy.data.collections.get(COLLECTION)
+    collection = bpy.data.collections.get(RIG_COLLECTION)
     if collection is not None and not collection.all_objects:
         bpy.data.collections.remove(collection)
 

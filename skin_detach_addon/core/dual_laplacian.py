@@ -29,7 +29,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from .errors import SkinDetachError
-from .geometry import bbox_diagonal, component_labels, cross_rows, unit_rows
+from .geometry import (barycentric, bbox_diagonal, component_labels, cross_rows, signed_volumes, unique_edges,
+                       unit_rows)
 from .validation import as_points, as_triangles, as_vertex_ids
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
@@ -163,17 +164,6 @@ def closed_components(faces, labels):
     return np.setdiff1d(np.unique(face_label), open_label)
 
 
-def signed_volumes(points, faces, face_label, labels):
-    """(len(labels),) enclosed volume of each component in ``labels`` (per-face ``face_label``)."""
-    if labels.size == 0:
-        return np.zeros(0)
-    p0, p1, p2 = points[faces[:, 0]], points[faces[:, 1]], points[faces[:, 2]]
-    per_face = np.einsum("ij,ij->i", p0, cross_rows(p1, p2)) / 6.0
-    index = np.searchsorted(labels, face_label)
-    valid = (index < labels.size) & (labels[np.minimum(index, labels.size - 1)] == face_label)
-    return np.bincount(index[valid], weights=per_face[valid], minlength=labels.size)
-
-
 class DualLaplacian:
     """Dual Laplacian solver for one proxy and one set of constrained vertices.
 
@@ -222,7 +212,7 @@ class DualLaplacian:
         height = np.einsum("ij,ij->i", c_i - a, normal)
         drop = c_i - height[:, None] * normal
         weights = np.full((k, 3), 1.0 / 3.0)
-        weights[self._paper] = _barycentric(drop, a, b, c)[self._paper]
+        weights[self._paper] = barycentric(drop, a, b, c)[self._paper]
         self._height = height
         # Degenerate dual triangles keep their rest offset in the frame of their own face.
         offset = c_i - np.einsum("ij,ijk->ik", weights, np.stack([a, b, c], axis=1))
@@ -265,8 +255,7 @@ class DualLaplacian:
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
         tail vertex (2e, m), cotangent-weighted. Returns its part of the normal equations."""
-        undirected = np.unique(np.sort(np.concatenate([self.faces[:, [0, 1]], self.faces[:, [1, 2]],
-                                                       self.faces[:, [2, 0]]]), axis=1), axis=0)
+        undirected = unique_edges(self.faces)[0]
         self._spoke_tail = np.concatenate([undirected[:, 0], undirected[:, 1]])
         spoke_head = np.concatenate([undirected[:, 1], undirected[:, 0]])
         n_spokes = self._spoke_tail.size
@@ -445,21 +434,6 @@ def _cotangent_weights(points, faces, undirected):
     mean = np.abs(weight).mean() if weight.size else 1.0
     weight = np.maximum(weight, 0.05 * mean)
     return weight / weight.mean()
-
-
-def _barycentric(p, a, b, c):
-    """(r, 3) barycentric weights of points ``p`` in triangles (a, b, c), each (r, 3)."""
-    u, v, w = b - a, c - a, p - a
-    uu = np.einsum("ij,ij->i", u, u)
-    uv = np.einsum("ij,ij->i", u, v)
-    vv = np.einsum("ij,ij->i", v, v)
-    wu = np.einsum("ij,ij->i", w, u)
-    wv = np.einsum("ij,ij->i", w, v)
-    denom = uv * uv - uu * vv
-    denom = np.where(denom != 0.0, denom, 1.0)
-    s = (uv * wv - vv * wu) / denom
-    t = (uv * wu - uu * wv) / denom
-    return np.stack([1.0 - s - t, s, t], axis=1)
 
 
 def deform_proxy(proxy_vertices, proxy_faces, constrained_ids, constrained_positions, preserve_volume=True,

@@ -84,3 +84,44 @@ def flat_ranges(starts, stops):
 def segment_ranges(indptr, rows):
     """Flattened CSR positions for ``rows``: (positions, owner) where owner[k] indexes ``rows``."""
     return flat_ranges(indptr[rows], indptr[rows + 1])
+
+
+def unique_edges(triangles):
+    """(e, 2) sorted vertex pairs of the mesh edges (sorted rows), and (e,) how many faces use each."""
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    return np.unique(edges, axis=0, return_counts=True)
+
+
+def barycentric_from_dots(uu, uv, vv, wu, wv, valid=None):
+    """(r, 3) barycentric weights of drop points in triangles (P1, P2, P3) from dot products only
+    (paper eq. 5): with u = P2 - P1, v = P3 - P1 and w = point - P1, every argument (r,) is the
+    dot product its name says. Triangles with a zero denominator, or False in ``valid`` (r,),
+    divide by one instead (their weights are meaningless; callers mask them)."""
+    denom = uv * uv - uu * vv
+    ok = denom != 0.0 if valid is None else valid
+    denom = np.where(ok, denom, 1.0)
+    s = (uv * wv - vv * wu) / denom
+    t = (uv * wu - uu * wv) / denom
+    return np.stack([1.0 - s - t, s, t], axis=1)
+
+
+def barycentric(p, a, b, c):
+    """(r, 3) barycentric weights of the drop points of ``p`` in triangles (a, b, c), each (r, 3)."""
+    u, v, w = b - a, c - a, p - a
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731
+    return barycentric_from_dots(dot(u, u), dot(u, v), dot(v, v), dot(w, u), dot(w, v))
+
+
+def signed_volumes(points, triangles, face_label=None, labels=None):
+    """Enclosed signed volume of a closed, consistently oriented triangle mesh: a float, or with
+    per-face ``face_label`` (f,) and sorted ``labels`` (c,), a (c,) array, one per label (faces
+    whose label is not listed are ignored)."""
+    p0, p1, p2 = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
+    per_face = np.einsum("ij,ij->i", p0, cross_rows(p1, p2)) / 6.0
+    if labels is None:
+        return float(per_face.sum())
+    if labels.size == 0:
+        return np.zeros(0)
+    index = np.searchsorted(labels, face_label)
+    valid = (index < labels.size) & (labels[np.minimum(index, labels.size - 1)] == face_label)
+    return np.bincount(index[valid], weights=per_face[valid], minlength=labels.size)

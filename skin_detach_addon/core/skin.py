@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .geometry import bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
+from .geometry import barycentric_from_dots, bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
 
 #: Barycentric tolerance for "the drop point lies in the triangle".
 CONTAIN_EPS = 1e-9
@@ -78,7 +78,6 @@ class ProxyFrames:
         self.uu = np.einsum("ij,ij->i", self.e1, self.e1)
         self.uv = np.einsum("ij,ij->i", self.e1, self.e2)
         self.vv = np.einsum("ij,ij->i", self.e2, self.e2)
-        self.denom = self.uv * self.uv - self.uu * self.vv
         scale = np.maximum(self.uu, self.vv)
         self.valid = self.cross_len > 1e-12 * np.maximum(scale, 1e-300)
 
@@ -103,11 +102,7 @@ class ProxyFrames:
         w = points - self.p0[faces]
         wu = np.einsum("ij,ij->i", w, self.e1[faces])
         wv = np.einsum("ij,ij->i", w, self.e2[faces])
-        uu, uv, vv = self.uu[faces], self.uv[faces], self.vv[faces]
-        denom = np.where(self.valid[faces], self.denom[faces], 1.0)
-        s = (uv * wv - vv * wu) / denom
-        t = (uv * wu - uu * wv) / denom
-        bary = np.stack([1.0 - s - t, s, t], axis=1)
+        bary = barycentric_from_dots(self.uu[faces], self.uv[faces], self.vv[faces], wu, wv, self.valid[faces])
         distance = np.einsum("ij,ij->i", w, self.normal[faces])
         return bary, distance
 

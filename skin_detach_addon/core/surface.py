@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import SkinDetachError
 from .geometry import flat_ranges
-from .normal_test import collapse_with_normal_test
+from .checked_collapse import collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
 from .simplification import simplify

@@ -2,9 +2,7 @@
 
 import bpy
 
-from . import binding as stored
-from . import handles, skin_rig
-from .deformation import last_step_ms
+from .. import api
 from .live_update import ERRORS
 
 
@@ -17,13 +15,13 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         settings = context.scene.skin_detach
-        obj = skin_rig.owner_of(context.active_object)
+        obj = api.mesh_of(context.active_object)
 
         box = layout.box()
         box.label(text="Build", icon='MOD_DECIM')
         box.prop(settings, "target_faces")
         box.prop(settings, "normal_test")
-        bound = stored.has_binding(obj)
+        bound = api.is_bound(obj)
         box.operator("skin_detach.build", text="Rebuild" if bound else "Build", icon='FILE_REFRESH')
         if obj is None or obj.type != 'MESH':
             layout.label(text="Select a mesh object", icon='INFO')
@@ -37,9 +35,9 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.add_handle", icon='ADD')
         row.operator("skin_detach.add_anchor", icon='PINNED')
-        for empty in handles.handles_of(obj, stored.proxy_of(obj)):
+        for empty in api.handles_of(obj):
             row = box.row(align=True)
-            icon = 'EMPTY_AXIS' if empty[handles.TAG]["kind"] == handles.HANDLE else 'PINNED'
+            icon = 'EMPTY_AXIS' if api.handle_kind(empty) == api.HANDLE else 'PINNED'
             select = row.operator("skin_detach.select_handle", text=empty.name, icon=icon,
                                   depress=empty == context.active_object)
             select.name = empty.name
@@ -58,14 +56,15 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         if obj.name in ERRORS:
             box.label(text=ERRORS[obj.name], icon='ERROR')
 
-        stats = stored.stats_of(obj)
+        figures = api.figures(obj)
+        stats = figures["build"]
         box = layout.box()
         box.label(text="Figures", icon='INFO')
         box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
         box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")
-        ms = last_step_ms(obj)
-        box.label(text=f"Last step: {ms:.1f} ms" if ms is not None else "Last step: -")
+        last = figures["last_step"]
+        box.label(text=f"Last step: {last['milliseconds']:.1f} ms" if last is not None else "Last step: -")
 
 
 CLASSES = (VIEW3D_PT_skin_detach,)

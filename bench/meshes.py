@@ -1,16 +1,36 @@
-"""Helpers for scripts: bundled meshes and flat subdivision to reach the paper's sizes."""
+"""Meshes for tests, benchmarks and the demo: the bundled OBJ files, flat subdivision to reach
+the paper's sizes, and a Blender mesh object from arrays.
+
+Arrays: ``points`` (n, 3) float64 indexed by vertex id, ``triangles`` (f, 3) int64 vertex ids.
+"""
 
 import pathlib
-import sys
 
 import numpy as np
 
+from skin_detach_addon.core.errors import SkinDetachError
+from skin_detach_addon.core.geometry import unique_edges
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from skin_detach_addon.core.obj_io import read_obj  # noqa: E402
-
 DATA = ROOT / "tests" / "data"
+
+
+def read_obj(path):
+    """(points (n, 3), triangles (f, 3)) of the Wavefront OBJ file at ``path`` (polygons fan-triangulated)."""
+    vertices, triangles = [], []
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        for line in handle:
+            if line.startswith("v "):
+                vertices.append(line.split()[1:4])
+            elif line.startswith("f "):
+                ids = [int(token.split("/")[0]) for token in line.split()[1:]]
+                triangles.extend((ids[0], ids[k], ids[k + 1]) for k in range(1, len(ids) - 1))
+    if not vertices or not triangles:
+        raise SkinDetachError(f"path: expected an OBJ file with vertices and faces, got none in {path!s}")
+    points = np.array(vertices, dtype=np.float64)
+    faces = np.array(triangles, dtype=np.int64)
+    faces = np.where(faces < 0, faces + points.shape[0], faces - 1)
+    return points, faces
 
 
 def bundled(name):
@@ -26,8 +46,10 @@ def subdivide(points, triangles, parts):
         a, b, c = triangles.T
         return (np.concatenate([points, points[triangles].mean(axis=1)]),
                 np.concatenate([np.stack(f, axis=1) for f in ((a, b, centre), (b, c, centre), (c, a, centre))]))
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    edges, inverse = np.unique(edges, axis=0, return_inverse=True)
+    edges = unique_edges(triangles)[0]
+    n = points.shape[0]
+    sides = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+    inverse = np.searchsorted(edges[:, 0] * n + edges[:, 1], sides[:, 0] * n + sides[:, 1])
     mid = inverse.reshape(3, -1).T + points.shape[0]
     a, b, c = triangles.T
     ab, bc, ca = mid.T

@@ -11,27 +11,40 @@ import bpy
 from bpy.app.handlers import persistent
 
 from .. import api
-from ..core.errors import SkinDetachError
-from . import binding as stored
-from .deformation import handle_signature, remember_handles, solved_signature
+from ..api import SkinDetachError
 
 _pending = set()
 _state = {"busy": False}
 #: Last error per object name, shown in the panel.
 ERRORS = {}
+#: Handle signature of every object at its last solve, write or cancel (runtime only).
+_SOLVED = {}
 
 
-def bound_objects(scene):
-    return [obj for obj in scene.objects if stored.has_binding(obj)]
+def handle_signature(obj, proxy):
+    """Tuple of the object's world matrix, the proxy's and every handle's own (basis) matrix:
+    changes when any of them moves, by any means, and is current as soon as it is set."""
+    values = [tuple(v for col in obj.matrix_world.col for v in col),
+              tuple(v for col in proxy.matrix_basis.col for v in col)]
+    for empty in api.handles_of(obj):
+        values.append((empty.name,) + tuple(v for col in empty.matrix_basis.col for v in col))
+    return tuple(values)
+
+
+def remember(obj):
+    """Take the handles' current transforms of ``obj`` as solved (after Apply, a drag, Reset)."""
+    proxy = api.proxy_of(obj)
+    if proxy is not None:
+        _SOLVED[obj.name] = handle_signature(obj, proxy)
 
 
 def notice(scene):
     """Queue every bound object of ``scene`` whose handles moved since its last solve."""
     if _state["busy"] or not scene.skin_detach.live_update:
         return
-    for obj in bound_objects(scene):
-        proxy = stored.proxy_of(obj)
-        if proxy is not None and handle_signature(obj, proxy) != solved_signature(obj):
+    for obj in api.bound_objects(scene.objects):
+        proxy = api.proxy_of(obj)
+        if proxy is not None and handle_signature(obj, proxy) != _SOLVED.get(obj.name):
             _pending.add(obj.name)
     if _pending and not bpy.app.timers.is_registered(flush):
         bpy.app.timers.register(flush, first_interval=0.0)
@@ -54,17 +67,19 @@ def flush():
         scene = bpy.context.scene
         for name in sorted(_pending):
             obj = bpy.data.objects.get(name)
-            if obj is None or not stored.has_binding(obj):
+            if obj is None or not api.is_bound(obj):
                 continue
             try:
-                api.deform(obj, scene.skin_detach.preserve_volume)
-                ERRORS.pop(name, None)
+                stats = api.deform(obj, scene.skin_detach.preserve_volume)
+                if stats["converged"]:
+                    ERRORS.pop(name, None)
+                else:
+                    ERRORS[name] = f"the last solve did not converge ({stats['iterations']} iterations)"
+                    print(f"Skin Detach live update: {obj.name}: {ERRORS[name]}")
             except SkinDetachError as exc:
                 ERRORS[name] = str(exc)
                 print(f"Skin Detach live update: {exc}")
-                proxy = stored.proxy_of(obj)
-                if proxy is not None:
-                    remember_handles(obj, proxy)  # report once, not on every later update
+            remember(obj)  # report once, not on every later update
         _pending.clear()
     finally:
         _state["busy"] = False

@@ -5,14 +5,7 @@
 
 import numpy as np
 
-from .geometry import face_cross, unit_rows
-
-
-def unique_edges(triangles):
-    """(e, 2) sorted vertex pairs of the mesh edges, and (e,) how many faces use each."""
-    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    return unique, counts
+from skin_detach_addon.core.geometry import face_cross, signed_volumes, unique_edges, unit_rows
 
 
 def edge_distortion(rest, deformed, triangles):
@@ -52,8 +45,7 @@ def dihedral_change(rest, deformed, triangles):
 
 def enclosed_volume(points, triangles):
     """Signed volume enclosed by a closed, consistently oriented triangle mesh."""
-    p0, p1, p2 = points[triangles[:, 0]], points[triangles[:, 1]], points[triangles[:, 2]]
-    return float(np.einsum("ij,ij->i", p0, np.cross(p1, p2)).sum() / 6.0)
+    return signed_volumes(points, triangles)
 
 
 def is_closed(triangles):

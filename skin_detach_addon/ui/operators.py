@@ -5,16 +5,23 @@ import bpy
 from mathutils import Vector
 
 from .. import api
-from ..core.errors import SkinDetachError
-from . import binding as stored
-from . import handles, skin_rig
-from .drag_session import CANCELLED, FINISHED, DragSession, RegionView
+from ..api import SkinDetachError
+from . import live_update
+from .region_view import RegionView
 
 
 def bound_owner(context):
     """The bound mesh object behind the active object (itself, its proxy or a handle), or None."""
-    obj = skin_rig.owner_of(context.active_object)
-    return obj if stored.has_binding(obj) else None
+    obj = api.mesh_of(context.active_object)
+    return obj if api.is_bound(obj) else None
+
+
+def solve_report(stats):
+    """Level and text of the report of a solve's figures (a warning when it did not converge)."""
+    text = f"solved in {stats['milliseconds']:.1f} ms ({stats['iterations']} iterations)"
+    if not stats["converged"]:
+        return {'WARNING'}, f"Skin Detach: the solve did not converge ({stats['iterations']} iterations); {text}"
+    return {'INFO'}, f"Skin Detach: {text}"
 
 
 class _Operator:
@@ -39,18 +46,26 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
     bl_idname = "skin_detach.build"
     bl_label = "Build Skin"
     bl_options = {'REGISTER', 'UNDO'}
+    target_faces: bpy.props.IntProperty(
+        name="Proxy Faces", description="Number of faces of the proxy the detail mesh is bound to "
+        "(default: the panel's value)", default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000)
+    normal_test: bpy.props.BoolProperty(
+        name="Normal Test", default=True, description="Refuse proxy edge collapses that would turn proxy faces "
+        "away from the detail they carry (default: the panel's value)")
 
     @classmethod
     def poll(cls, context):
-        obj = skin_rig.owner_of(context.active_object)
+        obj = api.mesh_of(context.active_object)
         return obj is not None and obj.type == 'MESH'
 
     def run(self, context):
-        obj = skin_rig.owner_of(context.active_object)
-        skin_rig.check_mesh_object(obj)
+        obj = api.mesh_of(context.active_object)
         if obj.mode == 'EDIT':
             bpy.ops.object.mode_set(mode='OBJECT')
         settings = context.scene.skin_detach
+        for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
+            if not self.properties.is_property_set(name):
+                setattr(self, name, getattr(settings, name))
         wm = context.window_manager
         status = getattr(context, "workspace", None)
 
@@ -63,7 +78,7 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
         wm.progress_begin(0, 100)
         try:
-            stats = api.build(obj, settings.target_faces, settings.normal_test, progress)
+            stats = api.build(obj, self.target_faces, self.normal_test, progress)
         finally:
             wm.progress_end()
             if status is not None:
@@ -78,19 +93,18 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
 
 class _AddOperator(_BoundOperator):
-    kind = handles.HANDLE
+    kind = api.HANDLE
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        obj, ids, on_proxy = skin_rig.selection(context)
-        add = api.add_handle if self.kind == handles.HANDLE else api.add_anchor
+        obj, ids, on_proxy = api.selected_vertices(context)
+        add = api.add_handle if self.kind == api.HANDLE else api.add_anchor
         empty = add(obj, ids, on_proxy=on_proxy)
         for obj in context.selected_objects:
             obj.select_set(False)
         empty.select_set(True)
         context.view_layer.objects.active = empty  # ready to drag
-        ids = len(empty[handles.TAG]["proxy_ids"])
-        self.report({'INFO'}, f"Skin Detach: {empty.name} holds {ids} proxy vertices")
+        self.report({'INFO'}, f"Skin Detach: {empty.name} holds {api.handle_vertex_count(empty)} proxy vertices")
         return {'FINISHED'}
 
 
@@ -98,23 +112,23 @@ class SKIN_DETACH_OT_add_handle(_AddOperator, bpy.types.Operator):
     """Make a handle (a hook empty) from the selected vertices of the bound mesh or its proxy"""
     bl_idname = "skin_detach.add_handle"
     bl_label = "Add Handle"
-    kind = handles.HANDLE
+    kind = api.HANDLE
 
 
 class SKIN_DETACH_OT_add_anchor(_AddOperator, bpy.types.Operator):
     """Pin the selected vertices of the bound mesh or its proxy in place"""
     bl_idname = "skin_detach.add_anchor"
     bl_label = "Add Anchor"
-    kind = handles.ANCHOR
+    kind = api.ANCHOR
 
 
 def _named_handle(context, name):
     if name:
         empty = bpy.data.objects.get(name)
-        if not handles.is_handle(empty):
+        if not api.is_handle(empty):
             raise SkinDetachError(f"name: expected a Skin Detach handle or anchor, got {name!r}")
         return empty
-    if handles.is_handle(context.active_object):
+    if api.is_handle(context.active_object):
         return context.active_object
     raise SkinDetachError("handle: expected an active handle or anchor empty, got "
                           f"{context.active_object.name if context.active_object else 'nothing'!r}")
@@ -130,7 +144,7 @@ class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
     def run(self, context):
         empty = _named_handle(context, self.name)
         name = empty.name
-        handles.remove(empty)
+        api.remove_handle(empty)
         self.report({'INFO'}, f"Skin Detach: removed {name}")
         return {'FINISHED'}
 
@@ -158,8 +172,10 @@ class SKIN_DETACH_OT_apply(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        stats = api.deform(bound_owner(context), context.scene.skin_detach.preserve_volume)
-        self.report({'INFO'}, f"Skin Detach: solved in {stats['milliseconds']:.1f} ms ({stats['iterations']} iterations)")
+        obj = bound_owner(context)
+        stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
+        live_update.remember(obj)
+        self.report(*solve_report(stats))
         return {'FINISHED'}
 
 
@@ -173,8 +189,8 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return bound_owner(context) is not None and handles.is_handle(context.active_object) and \
-            context.active_object[handles.TAG]["kind"] == handles.HANDLE
+        return bound_owner(context) is not None and api.is_handle(context.active_object) and \
+            api.handle_kind(context.active_object) == api.HANDLE
 
     def run(self, context):
         """Scripted path: move the active handle by ``offset`` and solve."""
@@ -182,14 +198,17 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         world = empty.matrix_world.copy()
         world.translation += Vector(self.offset)
         empty.matrix_world = world
-        api.deform(bound_owner(context), context.scene.skin_detach.preserve_volume)
+        obj = bound_owner(context)
+        stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
+        live_update.remember(obj)
+        self.report(*solve_report(stats))
         return {'FINISHED'}
 
     def invoke(self, context, event):
         if context.area is None or context.area.type != 'VIEW_3D':
             return self.execute(context)
         try:
-            self.session = DragSession(bound_owner(context), context.active_object,
+            self.session = api.DragSession(bound_owner(context), context.active_object,
                                        RegionView(context.region, context.region_data),
                                        (event.mouse_region_x, event.mouse_region_y),
                                        context.scene.skin_detach.preserve_volume)
@@ -206,12 +225,14 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         except SkinDetachError as exc:
             self.session.cancel()
             self.report({'ERROR'}, str(exc))
-            state = CANCELLED
-        if state in (FINISHED, CANCELLED):
+            state = api.CANCELLED
+        live_update.remember(self.session.obj)  # the drag solved this pose itself: live update keeps out
+        if state in (api.FINISHED, api.CANCELLED):
             context.area.header_text_set(None)
-            if state == FINISHED and self.session.step_ms:
+            if state == api.FINISHED and self.session.step_ms:
                 ms = sorted(self.session.step_ms)[len(self.session.step_ms) // 2]
-                self.report({'INFO'}, f"Skin Detach: {len(self.session.step_ms)} steps, median {ms:.1f} ms")
+                level, text = solve_report(self.session.last.figures())
+                self.report(level, f"{text}; {len(self.session.step_ms)} drag steps, median {ms:.1f} ms")
             return {state}
         context.area.header_text_set(self.session.header)
         return {'RUNNING_MODAL'}
@@ -224,7 +245,9 @@ class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        api.reset(bound_owner(context))
+        obj = bound_owner(context)
+        api.reset(obj)
+        live_update.remember(obj)
         self.report({'INFO'}, "Skin Detach: back to the rest shape")
         return {'FINISHED'}
 

@@ -1,0 +1,23 @@
+"""Everything an artist touches: operators, the N-panel, scene settings and live update. It
+calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly). Only
+:func:`register` and :func:`unregister` are meant to be called from outside."""
+
+import bpy
+
+from . import live_update, operators, panel, properties
+
+CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    properties.register()
+    live_update.register()
+
+
+def unregister():
+    live_update.unregister()
+    properties.unregister()
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)
