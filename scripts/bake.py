@@ -106,8 +106,9 @@ def run(args):
     start = time.perf_counter()
 
     def progress(done, total, record):
+        warning = "" if record["converged"] else f" (warning: the solve did not converge in {record['iterations']} iterations)"
         print(f"bake: frame {record['frame']} ({done}/{total}) solved in {record['milliseconds']:.1f} ms "
-              f"-> {record['output']}", flush=True)
+              f"-> {record['output']}{warning}", flush=True)
 
     records = api.bake(obj, frames, into=into, path=None if to_blend else args.output,
                        preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress)

@@ -274,4 +274,23 @@ def test_panel_draws_build_handles_deform_and_figures(scene):
     assert ("label", "Last step: -") in lines
     activate(handle)
     bpy.ops.skin_detach.apply()
-    assert any(kind == "label" and value.startswith("Last step: ") and value.endswith(" ms") for kind, value in _draw_panel())
+    lines = _draw_panel()
+    assert any(kind == "label" and value.startswith("Last step: ") and " ms, " in value and "iterations" in value
+               for kind, value in lines)
+    assert not any("did not converge" in value for kind, value in lines if kind == "label")
+
+
+def test_a_solve_that_did_not_converge_is_reported_by_apply_and_the_panel(scene, monkeypatch, capfd):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    monkeypatch.setattr(binding, "MAX_ITERATIONS", 1)
+    handle.location.x += 0.3
+    activate(handle)
+    assert bpy.ops.skin_detach.apply() == {'FINISHED'}
+    assert "the solve did not converge" in capfd.readouterr().out
+    activate(obj)
+    assert ("label", "The last solve did not converge") in _draw_panel()
+    monkeypatch.setattr(binding, "MAX_ITERATIONS", 300)
+    activate(handle)
+    assert bpy.ops.skin_detach.apply() == {'FINISHED'}
+    assert "did not converge" not in capfd.readouterr().out

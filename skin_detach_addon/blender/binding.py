@@ -19,6 +19,8 @@ from ..core.surface import SkinDetachedSurface
 from . import mesh_io
 
 KEY = "_skin_detach"
+#: Iterations a proxy solve may take before it reports that it did not converge.
+MAX_ITERATIONS = 300
 SCHEMA_VERSION = 1
 _CACHE = {}
 
@@ -52,7 +54,7 @@ class Binding:
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume), None]
         entry = self._solvers[key]
-        result = entry[0].solve(targets, initial=entry[1], max_iter=100, tol=tol)
+        result = entry[0].solve(targets, initial=entry[1], max_iter=MAX_ITERATIONS, tol=tol)
         entry[1] = result.vertices
         return result
 

@@ -31,6 +31,7 @@ from scipy.sparse.linalg import splu
 from .errors import SkinDetachError
 from .geometry import (barycentric, bbox_diagonal, component_labels, cross_rows, signed_volumes, unique_edges,
                        unit_rows)
+from .rotations import best_rotations
 from .validation import as_points, as_triangles, as_vertex_ids
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
@@ -38,26 +39,33 @@ DEGENERATE_DUAL = 1e-10
 #: Proximal weight (relative to the mean diagonal of the normal equations) towards the last
 #: iterate: keeps the system definite on odd meshes and vanishes at the fixed point.
 PROXIMAL = 1e-10
-#: Weight of the rigidity (rotated rest spoke) term against the dual Laplacian rows; 0 is the
-#: paper's method. Rigidity lowers stretching on broad bends (armadillo bend: edge distortion
-#: 0.089 -> 0.062 at 1.0) but costs on thin twisted bars (0.040 -> 0.061).
-DEFAULT_RIGIDITY = 0.0
+#: The solvers: "rotated" minimises the energy in the module docstring by local-global steps;
+#: "paper" is the paper's normal-update iteration (kept for comparison).
+METHODS = ("rotated", "paper")
+DEFAULT_METHOD = "rotated"
+#: Weight of the rigidity (rotated rest vertex spoke) term against the dual rows, per method.
+DEFAULT_RIGIDITY = {"rotated": 1.0, "paper": 0.0}
 #: Newton steps on the cubic volume-versus-step polynomial per iteration.
 VOLUME_NEWTON_STEPS = 3
 #: Past iterates mixed by Anderson acceleration of the normal-update iteration.
 ANDERSON_WINDOW = 5
+#: Halvings of the step at most when the volume projection would raise the energy.
+VOLUME_BACKTRACKS = 12
 #: Stop when this many iterations in a row have not reached a new smallest change.
 STALL_ITERATIONS = 12
 
 
 class _Anderson:
     """Anderson acceleration (type II) of a fixed-point iteration x -> g(x), with a restart
-    whenever the residual grows."""
+    whenever the residual grows (or the caller rejects a step: :meth:`reset`)."""
 
     def __init__(self, window):
         self.window = window
         self.xs, self.gs, self.fs = [], [], []
         self.best = np.inf
+
+    def reset(self):
+        self.xs, self.gs, self.fs = [], [], []
 
     def next(self, x, g, size):
         """Next iterate from the current one ``x`` and its image ``g`` (arrays of equal shape)."""
@@ -87,6 +95,7 @@ class DualLaplacianResult:
     converged: bool
     volume_change: float
     history: list = field(default_factory=list)
+    energy: list = field(default_factory=list)
 
 
 def dual_neighbours(points, faces):
@@ -172,7 +181,13 @@ class DualLaplacian:
     vertices no face uses, stay at rest.
     """
 
-    def __init__(self, proxy_vertices, proxy_faces, constrained_ids, preserve_volume=True, rigidity=DEFAULT_RIGIDITY):
+    def __init__(self, proxy_vertices, proxy_faces, constrained_ids, preserve_volume=True, rigidity=None,
+                 method=DEFAULT_METHOD):
+        if method not in METHODS:
+            raise SkinDetachError(f"method: expected one of {', '.join(map(repr, METHODS))}, got {method!r}")
+        self.method = method
+        if rigidity is None:
+            rigidity = DEFAULT_RIGIDITY[method]
         self.rest = as_points("proxy_vertices", proxy_vertices)
         m = self.rest.shape[0]
         self.faces = as_triangles("proxy_faces", proxy_faces, m)
@@ -220,18 +235,10 @@ class DualLaplacian:
         self._frame_coords = np.stack([np.einsum("ij,ij->i", offset, e) for e in (e1, e2, n)], axis=1)
 
         self.matrix = self._assemble(centroid, weights)
-        self._a_free = self.matrix[:, self.free].tocsc()
-        self._a_fixed = self.matrix[:, self.fixed].tocsc()
-        normal_eq = self._a_free.T @ self._a_free
-        if self.rigidity:
-            normal_eq = normal_eq + self._setup_rigidity(m)
-        normal_eq = normal_eq.tocsc()
-        self._proximal = PROXIMAL * (normal_eq.diagonal().mean() if self.free.size else 0.0)
-        normal_eq = normal_eq + self._proximal * sp.identity(self.free.size, format="csc")
-        # Symmetric positive definite: no pivoting, so the fill-reducing order is kept.
-        self._lu = splu(normal_eq, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                        options={"SymmetricMode": True}) if self.free.size else None
-        self._a_free_t = self._a_free.T.tocsr()
+        if method == "rotated":
+            self._setup_rotated(centroid, m)
+        else:
+            self._setup_paper(m)
 
         self._face_label = labels[self.faces[:, 0]]
         # Closed components: all are measured; those with a constraint are kept at rest volume.
@@ -252,6 +259,53 @@ class DualLaplacian:
         self._closed_scatter = sp.csr_matrix(
             (np.ones(3 * n_closed), (closed_faces.ravel(), np.repeat(np.arange(n_closed), 3))), shape=(m, n_closed))
 
+    def _factor(self, normal_eq):
+        """Factor the normal equations (free x free) with a tiny proximal term that keeps them
+        definite on odd meshes; symmetric positive definite, so no pivoting (the order is kept)."""
+        normal_eq = normal_eq.tocsc()
+        self._proximal = PROXIMAL * (normal_eq.diagonal().mean() if self.free.size else 0.0)
+        normal_eq = normal_eq + self._proximal * sp.identity(self.free.size, format="csc")
+        self._lu = splu(normal_eq, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                        options={"SymmetricMode": True}) if self.free.size else None
+
+    def _setup_paper(self, m):
+        self._a_free = self.matrix[:, self.free].tocsc()
+        self._a_fixed = self.matrix[:, self.fixed].tocsc()
+        normal_eq = self._a_free.T @ self._a_free
+        if self.rigidity:
+            normal_eq = normal_eq + self._setup_rigidity(m)
+        self._factor(normal_eq)
+        self._a_free_t = self._a_free.T.tocsr()
+
+    def _setup_rotated(self, centroid, m):
+        """The stacked operator B (r, m) of every term of the energy: the k dual Laplacian rows,
+        the 3k dual-cell spokes (neighbour centroid or ghost minus own centroid) and, weighted by
+        sqrt(rigidity), the 2e cotangent-weighted vertex spokes; each row belongs to one rotation
+        group (its face, or the tail vertex of its spoke)."""
+        k = self.faces.shape[0]
+        cell = self._q - sp.vstack([centroid] * 3)
+        blocks, groups = [self.matrix, cell], [np.arange(k), np.tile(np.arange(k), 3)]
+        n_groups = k
+        if self.rigidity:
+            self._setup_rigidity(m)
+            blocks.append(np.sqrt(self.rigidity) * self._edges)
+            groups.append(k + self._spoke_tail)
+            n_groups = k + m
+        b = sp.csr_matrix(sp.vstack(blocks))
+        row_group = np.concatenate(groups)
+        rest_rows = b @ self.rest
+        # M_j = G diag(rest rows' coordinate j) B (groups x m): the covariance of every group is
+        # C[:, :, j] = M_j X, and B^T (rotated rest rows) = sum_j M_j^T R[:, :, j].
+        self._moments = [sp.csr_matrix((rest_rows[:, j], (row_group, np.arange(b.shape[0]))),
+                                       shape=(n_groups, b.shape[0])) @ b for j in range(3)]
+        self._moments = [sp.csr_matrix(matrix) for matrix in self._moments]
+        self._moments_t = [matrix.T.tocsr() for matrix in self._moments]
+        self._gram = sp.csr_matrix(b.T @ b)  # K = B^T B (m x m): |B X - T|^2 = X.K X - 2 X.B^T T + |T|^2
+        self._rest_norm = float(np.sum(rest_rows * rest_rows))  # |T|^2: rotations keep lengths
+        b_free = b[:, self.free].tocsc()
+        self._gram_fixed = sp.csr_matrix(b_free.T @ b[:, self.fixed])
+        self._factor(b_free.T @ b_free)
+
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
         tail vertex (2e, m), cotangent-weighted. Returns its part of the normal equations."""
@@ -268,6 +322,8 @@ class DualLaplacian:
         self._rest_spokes = edges @ self.rest
         self._spoke_scatter = sp.csr_matrix((np.ones(n_spokes), (self._spoke_tail, np.arange(n_spokes))),
                                             shape=(m, n_spokes))
+        if self.method == "rotated":
+            return None
         self._e_free = (weight * edges[:, self.free]).tocsc()
         self._e_fixed = (weight * edges[:, self.fixed]).tocsc()
         self._e_free_t = self._e_free.T.tocsr()
@@ -367,6 +423,8 @@ class DualLaplacian:
         points[self.fixed] = fixed_points
         if self._lu is None:
             return DualLaplacianResult(points, 0, True, self.volume_change(points))
+        if self.method == "rotated":
+            return self._solve_rotated(points, fixed_points, int(max_iter), float(tol))
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -419,6 +477,97 @@ class DualLaplacian:
         return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history)
 
 
+    def _rotated_targets(self, points):
+        """Local step at ``points`` (m, 3): the best rotation of every group (face cells and,
+        with rigidity, vertex one-rings); returns B^T T (m, 3) for the rows' targets T (the
+        rotated rest rows) and the energy |B X - T|^2 (the least over all rotations)."""
+        covariance = np.stack([matrix @ points for matrix in self._moments], axis=2)  # (g, 3, 3)
+        rotations = best_rotations(covariance)
+        pulled = self._moments_t[0] @ rotations[:, :, 0]
+        pulled += self._moments_t[1] @ rotations[:, :, 1]
+        pulled += self._moments_t[2] @ rotations[:, :, 2]
+        energy = float(np.sum(points * (self._gram @ points)) - 2.0 * np.sum(points * pulled) + self._rest_norm)
+        return pulled, max(energy, 0.0)
+
+    def energy(self, points):
+        """The energy (module docstring) of ``points`` (m, 3), at the best rotations ("rotated" only)."""
+        if self.method != "rotated":
+            raise SkinDetachError(f"method: expected 'rotated' for an energy, got {self.method!r}")
+        return self._rotated_targets(as_points("points", points, self.rest.shape[0]))[1]
+
+    def _solve_rotated(self, points, fixed_points, max_iter, tol):
+        """Local-global descent on the energy, Anderson-accelerated where the energy agrees."""
+        free = self.free
+        known = self._gram_fixed @ fixed_points
+        keep_volume = self._closed.size > 0
+        scale = points.shape[0] * self.diagonal ** 2
+
+        def energy_with(trial, pulled):
+            """|B X - T|^2 at ``trial`` for the targets whose B^T T is ``pulled``."""
+            return float(np.sum(trial * (self._gram @ trial)) - 2.0 * np.sum(trial * pulled) + self._rest_norm)
+
+        def with_free(values):
+            out = points.copy()
+            out[free] = values
+            return out
+
+        def global_step(current_points, targets, energy):
+            """Minimise |B X - targets|^2 over the free vertices (under the volume constraint,
+            with a backtracking line search so the energy cannot rise); returns free positions."""
+            rhs = targets[free] - known + self._proximal * current_points[free]
+            if not keep_volume:
+                return self._lu.solve(np.ascontiguousarray(rhs)), None
+            gradient = self._volume_gradient(current_points[self.faces[self._closed_faces]])[free] * \
+                self._free_in_closed[:, None]
+            solved = self._lu.solve(np.ascontiguousarray(np.hstack([rhs, gradient])))
+            unconstrained = solved[:, :3]
+            direction = np.zeros_like(points)
+            direction[free] = solved[:, 3:]
+            start = current_points[free]
+            step = 1.0
+            for _ in range(VOLUME_BACKTRACKS):
+                trial = self._keep_volume(with_free(start + step * (unconstrained - start)), direction)
+                if energy_with(trial, targets) <= energy:
+                    break
+                step *= 0.5
+            return trial[free], direction
+
+        targets, energy = self._rotated_targets(points)
+        history, energies = [], [energy]
+        accelerator = _Anderson(ANDERSON_WINDOW)
+        current = points[free].copy()
+        converged = False
+        iterations = 0
+        for iterations in range(1, max_iter + 1):
+            mapped, direction = global_step(with_free(current), targets, energy)
+            residual = mapped - current
+            change = float(np.sum(residual * residual)) / scale
+            candidate = accelerator.next(current, mapped, change)
+            if candidate is not mapped:
+                trial = with_free(candidate)
+                if keep_volume:
+                    trial = self._keep_volume(trial, direction)
+                trial_targets, trial_energy = self._rotated_targets(trial)
+                if trial_energy <= energy:
+                    accepted = (trial[free], trial_targets, trial_energy)
+                else:
+                    accelerator.reset()
+                    candidate = mapped
+            if candidate is mapped:
+                mapped_targets, mapped_energy = self._rotated_targets(with_free(mapped))
+                accepted = (mapped, mapped_targets, mapped_energy)
+            moved = accepted[0] - current
+            change = float(np.sum(moved * moved)) / scale
+            current, targets, energy = accepted
+            history.append(change)
+            energies.append(energy)
+            if change <= tol:
+                converged = True
+                break
+        points[free] = current
+        return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history, energies)
+
+
 def _cotangent_weights(points, faces, undirected):
     """(e,) cotangent weights (cot alpha + cot beta) / 2 of the ``undirected`` edges (e, 2),
     clamped below at a small positive share of their mean, normalised to mean one."""
@@ -437,8 +586,8 @@ def _cotangent_weights(points, faces, undirected):
 
 
 def deform_proxy(proxy_vertices, proxy_faces, constrained_ids, constrained_positions, preserve_volume=True,
-                 rigidity=DEFAULT_RIGIDITY, **solve_options):
+                 rigidity=None, method=DEFAULT_METHOD, **solve_options):
     """One-off solve: :class:`DualLaplacian` then :meth:`DualLaplacian.solve`."""
     solver = DualLaplacian(proxy_vertices, proxy_faces, constrained_ids, preserve_volume=preserve_volume,
-                           rigidity=rigidity)
+                           rigidity=rigidity, method=method)
     return solver.solve(constrained_positions, **solve_options)

@@ -64,7 +64,14 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
         box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")
         last = figures["last_step"]
-        box.label(text=f"Last step: {last['milliseconds']:.1f} ms" if last is not None else "Last step: -")
+        if last is None:
+            box.label(text="Last step: -")
+        else:
+            volume = "" if last["volume_change"] != last["volume_change"] else \
+                f", volume {100 * last['volume_change']:+.2f} %"
+            box.label(text=f"Last step: {last['milliseconds']:.1f} ms, {last['iterations']} iterations{volume}")
+            if not last["converged"]:
+                box.label(text="The last solve did not converge", icon='ERROR')
 
 
 CLASSES = (VIEW3D_PT_skin_detach,)

@@ -1,0 +1,124 @@
+"""Best-fit rotations of many small point sets at once (the local step of as-rigid-as-possible
+methods), without a Python loop and without LAPACK's per-matrix overhead.
+
+Arrays: ``covariance`` (r, 3, 3), one matrix C = sum_j w_j current_j rest_j^T per set (current
+and rest vectors as columns); the rotation R of set i maximises trace(R^T C_i), i.e. minimises
+sum_j w_j |current_j - R rest_j|^2 (Kabsch; always a proper rotation, also for rank-deficient
+or reflected C).
+
+Method: the eigenvectors V of the symmetric C^T C by cyclic Jacobi sweeps (vectorised over the
+r matrices; converged when the off-diagonal is below 1e-15 of the trace, at most
+:data:`MAX_SWEEPS` sweeps), then U from C V column by column (Gram-Schmidt, the third column
+the cross product, so det U = det V = 1) and R = U V^T.
+"""
+
+import numpy as np
+
+#: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four).
+MAX_SWEEPS = 8
+_PAIRS = ((0, 1), (0, 2), (1, 2))
+
+
+def _cross(a, b):
+    out = np.empty(a.shape)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _jacobi(a, r):
+    """Eigenvectors of symmetric 3x3 matrices given as a dict (i, j) -> (r,) of the six entries
+    i <= j (changed in place): returns v[row][col], lists of (r,) arrays."""
+    v = [[np.ones(r) if i == j else np.zeros(r) for j in range(3)] for i in range(3)]
+    scale = np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2]) + 1e-300
+    for _ in range(MAX_SWEEPS):
+        off = np.abs(a[0, 1]) + np.abs(a[0, 2]) + np.abs(a[1, 2])
+        if not (off > 1e-15 * scale).any():
+            break
+        for p, q in _PAIRS:
+            o = 3 - p - q  # the third index
+            apq = a[p, q]
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+                # apq = 0 gives tau = +-inf and t = 0 (no turn); 0/0 (a zero matrix) is cleared below.
+                t = np.copysign(1.0, tau) / (np.abs(tau) + np.sqrt(1.0 + tau * tau))
+            t[np.isnan(t)] = 0.0
+            c = 1.0 / np.sqrt(1.0 + t * t)
+            sn = t * c
+            a[p, p] = a[p, p] - t * apq
+            a[q, q] = a[q, q] + t * apq
+            a[p, q] = np.zeros(r)
+            po, qo = (min(p, o), max(p, o)), (min(q, o), max(q, o))
+            apo, aqo = a[po], a[qo]
+            a[po] = c * apo - sn * aqo
+            a[qo] = sn * apo + c * aqo
+            for row in v:
+                vp, vq = row[p], row[q]
+                row[p] = c * vp - sn * vq
+                row[q] = sn * vp + c * vq
+    return v
+
+
+def symmetric_eigenvectors(s):
+    """(r, 3) eigenvalues, descending, and (r, 3, 3) eigenvectors (columns, det +1) of the
+    symmetric matrices ``s`` (r, 3, 3)."""
+    s = np.asarray(s, dtype=np.float64)
+    a = {(i, j): s[:, i, j].copy() for i in range(3) for j in range(i, 3)}
+    v = _jacobi(a, s.shape[0])
+    values = np.stack([a[0, 0], a[1, 1], a[2, 2]], axis=1)
+    vectors = np.array(v).transpose(2, 0, 1)  # (r, row, col)
+    order = np.argsort(-values, axis=1)
+    values = np.take_along_axis(values, order, axis=1)
+    vectors = np.take_along_axis(vectors, order[:, None, :], axis=2)
+    det = np.einsum("ij,ij->i", vectors[:, :, 0], _cross(vectors[:, :, 1], vectors[:, :, 2]))
+    vectors[det < 0, :, 2] *= -1.0
+    return values, vectors
+
+
+def _unit(x, y, z):
+    n = np.sqrt(x * x + y * y + z * z)
+    return n, np.where(n > 0.0, n, 1.0)
+
+
+def best_rotations(covariance):
+    """(r, 3, 3) proper rotations R_i maximising trace(R_i^T C_i) for ``covariance`` (r, 3, 3)."""
+    c = np.ascontiguousarray(covariance, dtype=np.float64).reshape(-1, 9)
+    r = c.shape[0]
+    cc = [c[:, k] for k in range(9)]  # cc[3 i + j] = C_ij
+    # The six entries of C^T C, then its eigenvectors (columns of v).
+    a = {(i, j): cc[i] * cc[j] + cc[3 + i] * cc[3 + j] + cc[6 + i] * cc[6 + j] for i in range(3) for j in range(i, 3)}
+    v = _jacobi(a, r)
+    lam = [a[0, 0], a[1, 1], a[2, 2]]
+    # Column of the largest eigenvalue (first) and of the middle one (second).
+    first = np.where(lam[0] >= lam[1], np.where(lam[0] >= lam[2], 0, 2), np.where(lam[1] >= lam[2], 1, 2))
+    last = np.where(lam[0] < lam[1], np.where(lam[0] < lam[2], 0, 2), np.where(lam[1] < lam[2], 1, 2))
+    second = 3 - first - last
+    second = np.where(first == last, (first + 1) % 3, second)
+    col = np.array(v)  # (row, col, r)
+    idx = np.arange(r)
+    v1 = [col[k, first, idx] for k in range(3)]
+    v2 = [col[k, second, idx] for k in range(3)]
+    v3 = [v1[1] * v2[2] - v1[2] * v2[1], v1[2] * v2[0] - v1[0] * v2[2], v1[0] * v2[1] - v1[1] * v2[0]]
+    u1 = [cc[3 * k] * v1[0] + cc[3 * k + 1] * v1[1] + cc[3 * k + 2] * v1[2] for k in range(3)]
+    u2 = [cc[3 * k] * v2[0] + cc[3 * k + 1] * v2[1] + cc[3 * k + 2] * v2[2] for k in range(3)]
+    n1, safe1 = _unit(*u1)
+    fallback = n1 <= 1e-300
+    u1 = [np.where(fallback, v1[k], u1[k] / safe1) for k in range(3)]
+    d = u1[0] * u2[0] + u1[1] * u2[1] + u1[2] * u2[2]
+    u2 = [u2[k] - d * u1[k] for k in range(3)]
+    n2, safe2 = _unit(*u2)
+    weak = n2 <= 1e-12 * np.maximum(n1, 1e-300)
+    if weak.any():  # rank one (or zero): any unit vector orthogonal to u1
+        px = np.abs(u1[0]) < 0.9  # cross with x unless u1 is close to it, else with y
+        other = [np.where(px, 0.0, -u1[2]), np.where(px, u1[2], 0.0), np.where(px, -u1[1], u1[0])]
+        no, safe_o = _unit(*other)
+        u2 = [np.where(weak, other[k] / safe_o, u2[k] / safe2) for k in range(3)]
+    else:
+        u2 = [u2[k] / safe2 for k in range(3)]
+    u3 = [u1[1] * u2[2] - u1[2] * u2[1], u1[2] * u2[0] - u1[0] * u2[2], u1[0] * u2[1] - u1[1] * u2[0]]
+    out = np.empty((r, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[:, i, j] = u1[i] * v1[j] + u2[i] * v2[j] + u3[i] * v3[j]
+    return out
