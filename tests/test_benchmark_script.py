@@ -45,3 +45,19 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
     assert len(found) > 30
     bad = {path: value for path, value in found.items() if not math.isfinite(value)}
     assert not bad
+
+
+def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_path):
+    script = BENCHMARK.parent / "benchmark_quality.py"
+    run = subprocess.run([sys.executable, str(script), "--meshes", "spot,cow", "--pose-meshes", "spot", "--poses", "3",
+                          "--faces", "300", "--json", str(tmp_path / "q.json")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    figures = json.loads((tmp_path / "q.json").read_text())
+    assert [(r["mesh"], r["method"]) for r in figures["poses"]] == [("spot", "rotated"), ("spot", "paper")]
+    rotated = figures["poses"][0]
+    assert rotated["warm_converged"] == rotated["cold_converged"] == 3
+    assert {r["mesh"] for r in figures["bend"]} == {"spot", "cow"}
+    for row in figures["bend"]:
+        assert math.isfinite(row["edge_distortion"]) and math.isfinite(row["dihedral_change_deg"])
+    assert "## Pose suite" in run.stdout and "## Bend scenario" in run.stdout

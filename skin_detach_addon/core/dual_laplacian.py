@@ -9,17 +9,31 @@ non-manifold edge takes the face whose normal agrees best). At rest the centroid
 signed height h_i above the plane of its neighbours (a, b, c) with normal
 n_i = unit((b - a) x (c - a)); its drop point has barycentric weights w_i in (a, b, c). With
 A = D - sum_j w_ij Q_j (k, m) -- D the centroid operator, Q_j the neighbour operators -- the
-solve minimises ||A X - delta||^2 with delta_i = h_i n_i(X) and the constrained vertices held
-exactly, updating the normals from the current neighbours at each iteration.
+rest dual Laplacian coordinates are delta0_i = (A X0)_i = h_i n_i.
 
-Beyond the paper, a rigidity term keeps the proxy from stretching: the rest edges around
-every vertex (its spokes), rotated by the rotation that best maps them onto the current ones
-(as-rigid-as-possible cells, Sorkine & Alexa 2007), are targets for the current spokes,
-weighted by ``rigidity`` (0 gives the paper's method alone). The Laplacian coordinates leave
-local scale free wherever the heights are small; this term does not.
+Method "rotated" (the default) minimises, over the free vertices X and one rotation per dual
+cell (R_i) and per vertex (R_v), with the constrained vertices held exactly,
 
-The normal equations depend only on which vertices are constrained, so :class:`DualLaplacian`
-factors them once and every solve only back-substitutes.
+    E(X) = sum_i |(A X)_i - R_i delta0_i|^2
+         + sum_i sum_j |(Q_j X - D X)_i - R_i (Q_j X0 - D X0)_i|^2
+         + rigidity * sum_v sum_(v,u) c_vu |(x_u - x_v) - R_v (x0_u - x0_v)|^2
+
+(the paper's coordinates with their frames rotated, the dual cell's spokes that fix R_i, and
+cotangent-weighted as-rigid-as-possible spokes), subject to every constrained closed component
+keeping its rest volume. Local step: every rotation at once (:func:`.rotations.best_rotations`,
+exact minimisers). Global step: one back-substitution with the factor of B^T B (B stacks all
+rows; it depends only on which vertices are constrained), then, with volume kept, the step
+along K^-1 grad V that restores the volume exactly, halved (backtracking) until the energy has
+not risen. So E never rises from one iterate to the next (``result.energy``); Anderson-mixed
+iterates are kept only when their energy is not above the plain step's start. It has
+converged when the mean squared change of the vertices in one iteration, over the squared
+bounding-box diagonal, is at most ``tol``. E is zero at rest, invariant under rigid motions
+and scales with the square of a uniform scale, so the solution follows both.
+
+Method "paper" is the paper's iteration, kept for comparison: minimise ||A X - delta||^2 with
+delta_i = h_i n_i(X), the normals updated from the current neighbours each iteration (a fixed
+point, not the minimiser of an energy: it can cycle, and then returns its calmest iterate),
+optionally with the rigidity spokes.
 """
 
 from dataclasses import dataclass, field

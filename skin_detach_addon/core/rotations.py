@@ -14,17 +14,11 @@ the cross product, so det U = det V = 1) and R = U V^T.
 
 import numpy as np
 
+from .geometry import cross_rows
+
 #: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four).
 MAX_SWEEPS = 8
 _PAIRS = ((0, 1), (0, 2), (1, 2))
-
-
-def _cross(a, b):
-    out = np.empty(a.shape)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
 
 
 def _jacobi(a, r):
@@ -71,7 +65,7 @@ def symmetric_eigenvectors(s):
     order = np.argsort(-values, axis=1)
     values = np.take_along_axis(values, order, axis=1)
     vectors = np.take_along_axis(vectors, order[:, None, :], axis=2)
-    det = np.einsum("ij,ij->i", vectors[:, :, 0], _cross(vectors[:, :, 1], vectors[:, :, 2]))
+    det = np.einsum("ij,ij->i", vectors[:, :, 0], cross_rows(vectors[:, :, 1], vectors[:, :, 2]))
     vectors[det < 0, :, 2] *= -1.0
     return values, vectors
 

@@ -1,0 +1,111 @@
+"""Deformation quality and solver trust, per mesh: the pose suite and the bend scenario.
+
+    python scripts/benchmark_quality.py [--meshes armadillo,spot,cow,...] [--poses 300]
+                                        [--pose-meshes armadillo,spot,cow] [--faces 1000] [--json PATH]
+
+Pose suite (bench/poses.py): random handle poses (axis random, up to 90 degrees, shift up to 10 %
+of the diagonal), each solved warm (from the previous pose, as dragging does) and cold at
+tol 1e-12: how many converged, how far warm and cold are apart, settle ms, and a handle turned
+180 degrees in 15-degree steps and back. Bend scenario (DESIGN section 4) on every mesh at the
+default proxy size: edge distortion, dihedral change, handle error and detail volume change for
+the default solver ("rotated") and the paper's iteration, beside full-resolution ARAP (libigl,
+10 iterations, dev-only). Blender's own stack is measured by scripts/benchmark.py (side by side).
+"""
+
+import argparse
+import json
+import pathlib
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
+
+from bench.arap import arap_reference
+from bench.meshes import bundled
+from bench.poses import pose_suite
+from bench.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
+from bench.scenario import bend_scenario
+
+from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
+
+MESHES = "armadillo,bunny,spot,homer,rocker-arm,cheburashka,fandisk,alligator,cow"
+
+
+def bend_rows(name, faces):
+    points, triangles = bundled(name)
+    scenario = bend_scenario(points)
+    surface = SkinDetachedSurface.build(points, triangles, target_faces=faces)
+    ids, targets = scenario.proxy_constraints(surface)
+    diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    closed = is_closed(triangles)
+    rows = []
+    for method in ("rotated", "paper"):
+        solver = DualLaplacian(surface.proxy_vertices, surface.proxy_faces, ids, method=method)
+        start = time.perf_counter()
+        result = solver.solve(targets, max_iter=500, tol=1e-12)
+        settle = time.perf_counter() - start
+        detail = surface.reconstruct(result.vertices)
+        rows.append(quality_row(name, method, points, detail, triangles, scenario, diag, closed,
+                                converged=result.converged, settle_ms=1000 * settle))
+    arap, _ = arap_reference(points, triangles, scenario, 10)
+    if arap is not None:
+        rows.append(quality_row(name, "ARAP (full resolution)", points, arap, triangles, scenario, diag, closed))
+    return rows
+
+
+def quality_row(name, method, points, detail, triangles, scenario, diag, closed, **extra):
+    handle = np.linalg.norm(detail[scenario.handle_ids] - scenario.move(points[scenario.handle_ids]), axis=1)
+    return dict(mesh=name, method=method, vertices=int(points.shape[0]),
+                edge_distortion=edge_distortion(points, detail, triangles),
+                dihedral_change_deg=dihedral_change(points, detail, triangles),
+                handle_error_pct_diag=100 * float(handle.mean()) / diag,
+                volume_change_pct=(100 * (enclosed_volume(detail, triangles) / enclosed_volume(points, triangles) - 1)
+                                   if closed else float("nan")), **extra)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--meshes", default=MESHES)
+    parser.add_argument("--pose-meshes", default="armadillo,spot,cow")
+    parser.add_argument("--poses", type=int, default=300)
+    parser.add_argument("--faces", type=int, default=1000)
+    parser.add_argument("--json")
+    args = parser.parse_args()
+    figures = {"poses": [], "bend": []}
+    print(f"## Pose suite ({args.poses} random poses, tol 1e-12, proxy target {args.faces} faces)\n")
+    print("| mesh | method | proxy faces | factor ms | warm / cold converged | warm-cold within 1e-5 diag "
+          "| max warm-cold (diag) | settle ms (median) | 180 deg and back (diag) |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in [n for n in args.pose_meshes.split(",") if n]:
+        points, triangles = bundled(name)
+        surface = SkinDetachedSurface.build(points, triangles, target_faces=args.faces)
+        for method in ("rotated", "paper"):
+            row = dict(mesh=name, method=method, **pose_suite(surface, bend_scenario(points), count=args.poses,
+                                                             method=method))
+            figures["poses"].append(row)
+            print(f"| {name} | {method} | {row['proxy_faces']} | {row['factor_ms']:.1f} | {row['warm_converged']} / "
+                  f"{row['cold_converged']} of {row['poses']} | {100 * row['within_1e-5']:.1f} % | "
+                  f"{row['max_warm_cold']:.1e} | {row['settle_ms_median']:.1f} | {row['turned_back_to_rest']:.1e} |",
+                  flush=True)
+    print(f"\n## Bend scenario, proxy target {args.faces} faces\n")
+    print("| mesh | vertices | method | edge distortion | dihedral change deg | handle error % diag "
+          "| volume change % | converged | settle ms |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in [n for n in args.meshes.split(",") if n]:
+        for row in bend_rows(name, args.faces):
+            figures["bend"].append(row)
+            print(f"| {name} | {row['vertices']:,} | {row['method']} | {row['edge_distortion']:.3f} | "
+                  f"{row['dihedral_change_deg']:.2f} | {row['handle_error_pct_diag']:.2e} | "
+                  f"{row['volume_change_pct']:+.2f} | {row.get('converged', '-')} | "
+                  f"{row['settle_ms']:.0f} |" if "settle_ms" in row else
+                  f"| {name} | {row['vertices']:,} | {row['method']} | {row['edge_distortion']:.3f} | "
+                  f"{row['dihedral_change_deg']:.2f} | - | {row['volume_change_pct']:+.2f} | - | - |", flush=True)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as handle:
+            json.dump(figures, handle, indent=2)
+
+
+if __name__ == "__main__":
+    main()
