@@ -9,7 +9,8 @@ import numpy as np
 def arap_reference(points, triangles, scenario, iterations, motion=None):
     """(n, 3) ARAP solution of ``points`` (n, 3), ``triangles`` (f, 3) with the scenario's anchors
     at rest and its handle moved (by ``motion``, (r, 3) -> (r, 3), default ``scenario.move``),
-    after ``iterations`` local-global iterations, and the seconds it took; (None, None) without libigl."""
+    after ``iterations`` local-global iterations, and the seconds it took; (None, None) without
+    libigl or when it refuses the mesh."""
     try:
         import igl
     except ImportError:
@@ -20,6 +21,9 @@ def arap_reference(points, triangles, scenario, iterations, motion=None):
     data = igl.ARAPData()
     data.max_iter = iterations
     start = time.perf_counter()
-    igl.arap_precomputation(points, triangles.astype(np.int64), 3, fixed, data)
-    result = igl.arap_solve(targets, data, points.copy())
+    try:
+        igl.arap_precomputation(points, triangles.astype(np.int64), 3, fixed, data)
+        result = igl.arap_solve(targets, data, points.copy())
+    except RuntimeError:  # libigl refuses some meshes (e.g. unreferenced vertices)
+        return None, None
     return result, time.perf_counter() - start

@@ -50,7 +50,7 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
 def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_path):
     script = BENCHMARK.parent / "benchmark_quality.py"
     run = subprocess.run([sys.executable, str(script), "--meshes", "spot,cow", "--pose-meshes", "spot", "--poses", "3",
-                          "--faces", "300", "--json", str(tmp_path / "q.json")],
+                          "--faces", "500", "--json", str(tmp_path / "q.json")],
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     figures = json.loads((tmp_path / "q.json").read_text())
