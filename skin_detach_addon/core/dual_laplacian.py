@@ -63,6 +63,11 @@ DEFAULT_RIGIDITY = {"rotated": 1.0, "paper": 0.0}
 VOLUME_NEWTON_STEPS = 3
 #: Past iterates mixed by Anderson acceleration of the normal-update iteration.
 ANDERSON_WINDOW = 5
+#: Continuation of the "rotated" solve: constrained vertices moving more than STAGE_JUMP of the
+#: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
+STAGE_JUMP = 0.05
+MAX_STAGES = 12
+STAGE_TOL = 1e-8
 #: Halvings of the step at most when the volume projection would raise the energy.
 VOLUME_BACKTRACKS = 12
 #: Stop when this many iterations in a row have not reached a new smallest change.
@@ -434,11 +439,12 @@ class DualLaplacian:
             raise SkinDetachError(f"tol: expected a finite number >= 0, got {tol!r}")
         fixed_points = self.rest[self.fixed].copy()
         fixed_points[self._held_in_fixed] = targets
+        start = points[self.fixed].copy()
         points[self.fixed] = fixed_points
         if self._lu is None:
             return DualLaplacianResult(points, 0, True, self.volume_change(points))
         if self.method == "rotated":
-            return self._solve_rotated(points, fixed_points, int(max_iter), float(tol))
+            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol))
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -508,6 +514,20 @@ class DualLaplacian:
         if self.method != "rotated":
             raise SkinDetachError(f"method: expected 'rotated' for an energy, got {self.method!r}")
         return self._rotated_targets(as_points("points", points, self.rest.shape[0]))[1]
+
+    def _continue_rotated(self, points, start, fixed_points, max_iter, tol):
+        """Where the constrained vertices jump far from ``start`` (their positions in the initial
+        guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
+        solved loosely from the last (continuation), so a cold start lands on the minimum a drag
+        along the way would reach, not on a fold the first global step happened to fall into."""
+        jump = float(np.abs(fixed_points - start).max()) / self.diagonal
+        stages = int(min(MAX_STAGES, np.ceil(jump / STAGE_JUMP)))
+        for stage in range(1, stages):
+            partial = start + (stage / stages) * (fixed_points - start)
+            points[self.fixed] = partial
+            points = self._solve_rotated(points, partial, max_iter, STAGE_TOL).vertices
+        points[self.fixed] = fixed_points
+        return self._solve_rotated(points, fixed_points, max_iter, tol)
 
     def _solve_rotated(self, points, fixed_points, max_iter, tol):
         """Local-global descent on the energy, Anderson-accelerated where the energy agrees."""

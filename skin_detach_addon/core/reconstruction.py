@@ -1,8 +1,15 @@
-"""The rebuild of the detail mesh from a deformed proxy (paper eq. 10/11) as one sparse product.
+"""The rebuild of the detail mesh from a deformed proxy (paper eq. 10/11) as one sparse product,
+with offsets carried by a frame field that is continuous across proxy edges.
 
-With rest-area weights every detail vertex is a fixed linear combination of proxy vertices
-and per-face scaled normals: X = W [P'; N'] with W (n, m + k) sparse, P' (m, 3) the deformed
-proxy and N' (k, 3) its face normals scaled by sqrt(|cross|) (see :mod:`.skin`).
+Every association (detail vertex, proxy face f, barycentrics b, height h) gives the candidate
+sum_c b_c P'_(f_c) + h sum_c b_c V'_(f, c): the drop point, plus the face's rest scaled normal
+N0_f = cross / sqrt(|cross|) turned and scaled by the similarity s_j R_j of each corner vertex
+j = f_c, blended by the same barycentrics (V'_(f, c) = s_j R_j N0_f). R_j and s_j are the best
+rotation and scale of vertex j's one-ring (cotangent-weighted rest spokes onto deformed ones),
+so neighbouring faces share them and the detail has no seam where the proxy bends. At rest
+V' = N0 (the rebuild is exact), under a rigid motion or a uniform scale V' is the deformed
+face's own scaled normal (both are reproduced exactly). With rest-area weights the rebuild is
+X = W [P'; V'] with W (n, m + 3k) fixed and sparse (row-block 3f + c of V' is corner c of face f).
 """
 
 import os
@@ -11,7 +18,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import face_cross
+from .geometry import face_cross, unique_edges
+from .rotations import best_rotations
 
 
 def scaled_normals(points, triangles):
@@ -21,16 +29,67 @@ def scaled_normals(points, triangles):
     return cross / np.where(length > 0.0, length, 1.0)[:, None]
 
 
+class VertexSimilarities:
+    """Best similarity (scale s_j, rotation R_j) of every proxy vertex's one-ring, rest -> deformed.
+
+    rest (m, 3), triangles (k, 3). ``__call__(points (m, 3))`` returns scales (m,) and rotations
+    (m, 3, 3) minimising sum_(j,u) c_ju |(x_u - x_j) - s_j R_j (x0_u - x0_j)|^2 over each one-ring
+    (c: cotangent weights clamped positive); a vertex with no spoke keeps (1, I).
+    """
+
+    def __init__(self, rest, triangles):
+        m = rest.shape[0]
+        edges = unique_edges(triangles)[0]
+        tail = np.concatenate([edges[:, 0], edges[:, 1]])
+        head = np.concatenate([edges[:, 1], edges[:, 0]])
+        spokes = rest[head] - rest[tail]
+        weight = np.tile(_positive_cotangents(rest, triangles, edges), 2)
+        n = tail.size
+        difference = sp.csr_matrix((np.r_[weight, -weight], (np.r_[np.arange(n), np.arange(n)], np.r_[head, tail])),
+                                   shape=(n, m))
+        group = sp.csr_matrix((np.ones(n), (tail, np.arange(n))), shape=(m, n))
+        # Covariance column j: M_j X with M_j = G diag(rest spoke coordinate j) (weighted differences).
+        self._moments = [sp.csr_matrix(group @ sp.diags(spokes[:, j]) @ difference) for j in range(3)]
+        self._rest_norm = np.asarray(group @ (weight * np.einsum("ij,ij->i", spokes, spokes))).ravel()
+        self._lonely = self._rest_norm <= 0.0
+
+    def __call__(self, points):
+        covariance = np.stack([matrix @ points for matrix in self._moments], axis=2)
+        rotations = best_rotations(covariance)
+        trace = np.einsum("nij,nij->n", rotations, covariance)
+        scales = np.where(self._lonely, 1.0, trace / np.where(self._lonely, 1.0, self._rest_norm))
+        rotations[self._lonely] = np.eye(3)
+        return scales, rotations
+
+
+def _positive_cotangents(points, triangles, edges):
+    """(e,) cotangent weights of ``edges`` (e, 2) (sorted rows of :func:`unique_edges`), clamped
+    below at a small positive share of their mean."""
+    m = points.shape[0]
+    key = edges[:, 0] * m + edges[:, 1]
+    weight = np.zeros(edges.shape[0])
+    for j in range(3):
+        a, b, c = triangles[:, j], triangles[:, (j + 1) % 3], triangles[:, (j + 2) % 3]
+        u, v = points[a] - points[c], points[b] - points[c]
+        cross = np.linalg.norm(np.cross(u, v), axis=1)
+        cot = np.einsum("ij,ij->i", u, v) / np.maximum(cross, 1e-300)
+        weight += np.bincount(np.searchsorted(key, np.minimum(a, b) * m + np.maximum(a, b)), weights=cot / 2,
+                              minlength=weight.size)
+    mean = np.abs(weight).mean() if weight.size else 1.0
+    return np.maximum(weight, 0.05 * max(mean, 1e-300))
+
+
 def rebuild_matrix(skin, proxy_triangles, n_proxy, weld):
-    """(n, m + k) CSR matrix W of the rebuild; row i is detail vertex i (``weld`` (n,) maps it
-    to its welded row of ``skin``)."""
+    """(n, m + 3k) CSR matrix W of the rebuild; row i is detail vertex i (``weld`` (n,) maps it
+    to its welded row of ``skin``); column m + 3f + c is corner c of face f's frame vector."""
     k = proxy_triangles.shape[0]
     u = skin.case.shape[0]
     corners = proxy_triangles[skin.face]
-    rows = np.concatenate([np.repeat(skin.vertex, 3), skin.vertex])
-    cols = np.concatenate([corners.ravel(), n_proxy + skin.face])
-    data = np.concatenate([(skin.bary * skin.weight[:, None]).ravel(), skin.height * skin.weight])
-    welded = sp.csr_matrix((data, (rows, cols)), shape=(u, n_proxy + k))
+    rows = np.concatenate([np.repeat(skin.vertex, 3), np.repeat(skin.vertex, 3)])
+    cols = np.concatenate([corners.ravel(), (n_proxy + 3 * skin.face[:, None] + np.arange(3)).ravel()])
+    blend = skin.bary * skin.weight[:, None]
+    data = np.concatenate([blend.ravel(), (blend * skin.height[:, None]).ravel()])
+    welded = sp.csr_matrix((data, (rows, cols)), shape=(u, n_proxy + 3 * k))
     welded.sum_duplicates()
     matrix = welded if weld.size == u and np.array_equal(weld, np.arange(u)) else welded[weld]
     matrix = sp.csr_matrix(matrix)
@@ -64,11 +123,13 @@ class Rebuild:
     product in scipy; large meshes split their rows over :data:`PARALLEL_BLOCKS` threads.
     """
 
-    def __init__(self, matrix, proxy_triangles):
+    def __init__(self, matrix, proxy_vertices, proxy_triangles):
         self.triangles = proxy_triangles
         self.n_detail = matrix.shape[0]
         self.nnz = matrix.nnz
-        self.n_proxy = matrix.shape[1] - proxy_triangles.shape[0]
+        self.n_proxy = proxy_vertices.shape[0]
+        self._rest_normals = scaled_normals(proxy_vertices, proxy_triangles)
+        self._similarities = VertexSimilarities(proxy_vertices, proxy_triangles)
         self._stacked = np.empty((3, matrix.shape[1]))
         blocks = PARALLEL_BLOCKS if self.n_detail >= PARALLEL_MIN_ROWS else 1
         bounds = np.linspace(0, self.n_detail, blocks + 1).astype(int)
@@ -78,6 +139,14 @@ class Rebuild:
             [(a, b, matrix[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
         self._blocks32 = None
 
+    def frame_vectors(self, points):
+        """(3k, 3) V': row 3f + c is face f's rest scaled normal under corner c's similarity."""
+        scales, rotations = self._similarities(points)
+        corner = self.triangles.ravel()
+        normals = np.repeat(self._rest_normals, 3, axis=0)
+        turned = np.einsum("nij,nj->ni", rotations[corner], normals)
+        return turned * scales[corner][:, None]
+
     def _rebuild_rows(self, block, stacked, out):
         start, stop, rows = block
         for axis in range(3):
@@ -86,7 +155,7 @@ class Rebuild:
     def __call__(self, points, out=None):
         stacked = self._stacked
         stacked[:, :self.n_proxy] = points.T
-        stacked[:, self.n_proxy:] = scaled_normals(points, self.triangles).T
+        stacked[:, self.n_proxy:] = self.frame_vectors(points).T
         if out is None:
             out = np.empty((self.n_detail, 3))
         blocks = self._blocks

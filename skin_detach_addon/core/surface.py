@@ -56,7 +56,8 @@ class SkinDetachedSurface:
         self.skin = skin
         self.fingerprint = fingerprint
         self.stats = stats
-        self._rebuild = Rebuild(rebuild_matrix(skin, proxy_faces, proxy_vertices.shape[0], weld), proxy_faces)
+        self._rebuild = Rebuild(rebuild_matrix(skin, proxy_faces, proxy_vertices.shape[0], weld), proxy_vertices,
+                               proxy_faces)
 
     @property
     def n_detail(self):
