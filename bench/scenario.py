@@ -49,6 +49,17 @@ class BendScenario:
         return np.concatenate([anchors, handle]), np.concatenate([rest[anchors], self.move(rest[handle])])
 
 
+    def proxy_groups(self, surface):
+        """(m,) rigid group of every proxy vertex of ``surface``: 0 anchors, 1 the handle, -1 free
+        (for ``surface.reconstruct(..., groups=...)``)."""
+        ids, _ = self.proxy_constraints(surface)
+        handle = surface.proxy_vertices_for(self.handle_ids)
+        groups = np.full(surface.proxy_vertices.shape[0], -1, dtype=np.int64)
+        groups[ids] = 0
+        groups[handle] = 1
+        return groups
+
+
 def bend_scenario(points, angle_degrees=45.0, shift_fraction=0.25, band=0.10):
     """:class:`BendScenario` of ``points`` (n, 3)."""
     extent = points.max(axis=0) - points.min(axis=0)

@@ -40,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
 
+from bench import blender_stack
 from bench.arap import arap_reference
 from bench.meshes import ROOT, SIZES, blender_mesh, subdivided
 
@@ -169,52 +170,6 @@ def quality(rest, deformed, triangles, scenario, arap):
     return row
 
 
-def evaluated_positions(obj):
-    import bpy
-    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
-    out = np.empty(3 * len(mesh.vertices), dtype=np.float32)
-    mesh.vertices.foreach_get("co", out)
-    return out.reshape(-1, 3).astype(np.float64)
-
-
-def hook_and_laplacian(obj, scenario, groups):
-    """Hook (on the handle group) + Laplacian Deform (anchors and handle held) on ``obj``,
-    bound at rest; returns the hook empty and the bind seconds."""
-    import bpy
-    empty = bpy.data.objects.new(f"{obj.name}_hook", None)
-    bpy.context.scene.collection.objects.link(empty)
-    hook = obj.modifiers.new("hook", 'HOOK')
-    hook.object, hook.vertex_group = empty, groups[1]
-    laplacian = obj.modifiers.new("laplacian", 'LAPLACIANDEFORM')
-    laplacian.vertex_group = groups[0]
-    start = time.perf_counter()
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.laplaciandeform_bind(modifier=laplacian.name)
-    bpy.context.view_layer.update()
-    return empty, time.perf_counter() - start, laplacian
-
-
-def groups_for(obj, anchor_mask, handle_mask):
-    held = obj.vertex_groups.new(name="held")
-    held.add(np.flatnonzero(anchor_mask | handle_mask).tolist(), 1.0, 'REPLACE')
-    hooked = obj.vertex_groups.new(name="hooked")
-    hooked.add(np.flatnonzero(handle_mask).tolist(), 1.0, 'REPLACE')
-    return "held", "hooked"
-
-
-def move_hook(empty, scenario, steps):
-    """Median ms of ``steps`` hook moves along the bend, each followed by the depsgraph update."""
-    import bpy
-    from mathutils import Matrix
-    times = []
-    for k in range(1, steps + 1):
-        start = time.perf_counter()
-        empty.matrix_world = Matrix(scenario.motion(k / steps).tolist())
-        bpy.context.view_layer.update()
-        times.append(time.perf_counter() - start)
-    return median_ms(times)
-
-
 def side_row(size, steps):
     import bpy
 
@@ -229,35 +184,13 @@ def side_row(size, steps):
     ours_ms = blender_drag(obj, handle, scenario, steps)
     arap = arap_reference(points, triangles, scenario, ARAP_ITERATIONS)[0] if size == "50K" else None
     ours_q = quality(points, mesh_io.read_positions(obj.data).astype(np.float64), triangles, scenario, arap)
-    anchor_mask = np.zeros(points.shape[0], dtype=bool)
-    anchor_mask[scenario.anchor_ids] = True
-    handle_mask = np.zeros(points.shape[0], dtype=bool)
-    handle_mask[scenario.handle_ids] = True
 
     # Blender's stack: Decimate copy + Hook + Laplacian Deform, Surface Deform on the detail
     fresh_scene()
-    obj = blender_mesh("armadillo", points, triangles)
-    proxy = blender_mesh("stack_proxy", points, triangles)
-    groups = groups_for(proxy, anchor_mask, handle_mask)
-    start = time.perf_counter()
-    decimate = proxy.modifiers.new("decimate", 'DECIMATE')
-    decimate.ratio = proxy_faces / triangles.shape[0]  # Decimate counts triangles
-    with bpy.context.temp_override(object=proxy, active_object=proxy):
-        bpy.ops.object.modifier_apply(modifier=decimate.name)
-    decimate_s = time.perf_counter() - start
-    empty, laplacian_bind_s, _ = hook_and_laplacian(proxy, scenario, groups)
-    start = time.perf_counter()
-    surface = obj.modifiers.new("surface", 'SURFACE_DEFORM')
-    surface.target = proxy
-    with bpy.context.temp_override(object=obj, active_object=obj):
-        bpy.ops.object.surfacedeform_bind(modifier=surface.name)
-    bpy.context.view_layer.update()
-    surface_bind_s = time.perf_counter() - start
-    stack = {"decimate_s": decimate_s, "bind_s": laplacian_bind_s + surface_bind_s,
-             "proxy_faces": len(proxy.data.polygons), "bound": bool(surface.is_bound)}
-    if surface.is_bound:
-        stack["frame_ms"] = move_hook(empty, scenario, steps)
-        stack["quality"] = quality(points, evaluated_positions(obj), triangles, scenario, arap)
+    stack, obj, empty = blender_stack.build_stack(points, triangles, scenario, proxy_faces)
+    if stack["bound"]:
+        stack["frame_ms"] = blender_stack.move_hook(empty, scenario, steps)
+        stack["quality"] = quality(points, blender_stack.evaluated_positions(obj), triangles, scenario, arap)
     row = {"size": size, "vertices": int(points.shape[0]), "steps": steps,
            "skin_detach": {"build_s": build, "proxy_faces": proxy_faces, "step_ms": ours_ms, "quality": ours_q},
            "blender_stack": stack}
@@ -265,11 +198,12 @@ def side_row(size, steps):
     if size == "50K":  # the conventional single-resolution route: Laplacian Deform on the detail itself
         fresh_scene()
         whole = blender_mesh("armadillo", points, triangles)
-        empty, bind_s, laplacian = hook_and_laplacian(whole, scenario, groups_for(whole, anchor_mask, handle_mask))
+        groups = blender_stack.groups_for(whole, *blender_stack.masks(points.shape[0], scenario))
+        empty, bind_s, laplacian = blender_stack.hook_and_laplacian(whole, scenario, groups)
         single = {"bind_s": bind_s, "bound": bool(laplacian.is_bind)}
         if laplacian.is_bind:
-            single["frame_ms"] = move_hook(empty, scenario, steps)
-            single["quality"] = quality(points, evaluated_positions(whole), triangles, scenario, arap)
+            single["frame_ms"] = blender_stack.move_hook(empty, scenario, steps)
+            single["quality"] = quality(points, blender_stack.evaluated_positions(whole), triangles, scenario, arap)
         row["laplacian_whole_detail"] = single
     return row
 

@@ -323,3 +323,20 @@ def test_rebuild_frames_follow_the_proxy_without_seams(bundled):
     np.add.at(per_face, skin.vertex, candidates * skin.weight[:, None])
     seam_free = sds.reconstruct(bent)
     assert dihedral_change(points, seam_free, tris) <= 0.95 * dihedral_change(points, per_face[sds.weld], tris)
+
+
+def test_detail_carried_by_one_rigid_group_moves_exactly_with_it(bundled):
+    from bench.scenario import bend_scenario
+    from skin_detach_addon.core import DualLaplacian
+    points, tris = bundled("spot")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=400)
+    scenario = bend_scenario(points)
+    ids, targets = scenario.proxy_constraints(sds)
+    bent = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids).solve(targets, max_iter=300).vertices
+    groups = scenario.proxy_groups(sds)
+    detail = sds.reconstruct(bent, groups=groups)
+    expected = scenario.move(points[scenario.handle_ids])
+    assert np.abs(detail[scenario.handle_ids] - expected).max() <= 1e-9 * diagonal(points)
+    assert np.abs(detail[scenario.anchor_ids] - points[scenario.anchor_ids]).max() <= 1e-9 * diagonal(points)
+    with pytest.raises(SkinDetachError, match="groups"):
+        sds.reconstruct(bent, groups=groups[:-1])

@@ -62,10 +62,11 @@ class Binding:
         for entry in self._solvers.values():
             entry[1] = None
 
-    def rebuild(self, proxy_vertices):
-        """(n, 3) float32 detail positions from deformed proxy vertices (m, 3), in a reused buffer
-        (copy it to keep it past the next call)."""
-        return self.surface.reconstruct(proxy_vertices, out=self._buffer)
+    def rebuild(self, proxy_vertices, groups=None):
+        """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``groups``: their
+        rigid groups, see :meth:`SkinDetachedSurface.reconstruct`), in a reused buffer (copy it
+        to keep it past the next call)."""
+        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups)
 
 
 def has_binding(obj):

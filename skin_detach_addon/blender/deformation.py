@@ -77,12 +77,12 @@ class Deformation:
         """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        ids, targets = handles.constraints(self.obj, self.handles(), self.binding.surface.proxy_vertices)
+        ids, targets, groups = handles.constraints(self.obj, self.handles(), self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
-        return result, self.binding.rebuild(result.vertices)
+        return result, self.binding.rebuild(result.vertices, groups)
 
     def step(self, tol=SETTLE_TOL):
         """:meth:`solve`, then write the mesh and the proxy and record the written digest and

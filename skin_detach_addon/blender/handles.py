@@ -130,13 +130,15 @@ def local_motion(obj, empty):
 
 
 def constraints(obj, empties, rest_proxy):
-    """Constrained proxy ids (c,) sorted, and their targets (c, 3) in local space, from the
-    handle and anchor ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a
-    later handle overrides an earlier."""
+    """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, and the rigid group
+    of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), from the handle
+    and anchor ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later
+    handle overrides an earlier."""
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
-    for empty in sorted(empties, key=lambda e: kind_of(e) == HANDLE):
+    groups = np.full(m, -1, dtype=np.int64)
+    for label, empty in enumerate(sorted(empties, key=lambda e: kind_of(e) == HANDLE), start=1):
         ids = proxy_ids_of(empty)
         if ids.size == 0 or ids.max() >= m:
             raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids below {m}, "
@@ -146,8 +148,10 @@ def constraints(obj, empties, rest_proxy):
             if not np.isfinite(motion).all():
                 raise SkinDetachError(f"handle {empty.name!r}: expected an invertible transform, got a degenerate one")
             targets[ids] = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
+            groups[ids] = label
         else:
             targets[ids] = rest_proxy[ids]
+            groups[ids] = 0
         held[ids] = True
     ids = np.flatnonzero(held)
-    return ids, targets[ids]
+    return ids, targets[ids], groups

@@ -32,33 +32,53 @@ def scaled_normals(points, triangles):
 class VertexSimilarities:
     """Best similarity (scale s_j, rotation R_j) of every proxy vertex's one-ring, rest -> deformed.
 
-    rest (m, 3), triangles (k, 3). ``__call__(points (m, 3))`` returns scales (m,) and rotations
-    (m, 3, 3) minimising sum_(j,u) c_ju |(x_u - x_j) - s_j R_j (x0_u - x0_j)|^2 over each one-ring
-    (c: cotangent weights clamped positive); a vertex with no spoke keeps (1, I).
+    rest (m, 3), triangles (k, 3). ``__call__(points (m, 3), groups=None)`` returns scales (m,)
+    and rotations (m, 3, 3) minimising sum_(j,u) c_ju |(x_u - x_j) - s_j R_j (x0_u - x0_j)|^2 over
+    each one-ring (c: cotangent weights clamped positive); a vertex with no spoke keeps (1, I).
+    ``groups`` (m,) int labels rigid groups (a handle's vertices, moved by one rigid motion;
+    -1: none): a grouped vertex fits only its spokes into its own group (when it has any), so
+    its similarity is that group's motion exactly.
     """
 
     def __init__(self, rest, triangles):
         m = rest.shape[0]
         edges = unique_edges(triangles)[0]
-        tail = np.concatenate([edges[:, 0], edges[:, 1]])
-        head = np.concatenate([edges[:, 1], edges[:, 0]])
-        spokes = rest[head] - rest[tail]
-        weight = np.tile(_positive_cotangents(rest, triangles, edges), 2)
-        n = tail.size
-        difference = sp.csr_matrix((np.r_[weight, -weight], (np.r_[np.arange(n), np.arange(n)], np.r_[head, tail])),
-                                   shape=(n, m))
-        group = sp.csr_matrix((np.ones(n), (tail, np.arange(n))), shape=(m, n))
-        # Covariance column j: M_j X with M_j = G diag(rest spoke coordinate j) (weighted differences).
-        self._moments = [sp.csr_matrix(group @ sp.diags(spokes[:, j]) @ difference) for j in range(3)]
-        self._rest_norm = np.asarray(group @ (weight * np.einsum("ij,ij->i", spokes, spokes))).ravel()
-        self._lonely = self._rest_norm <= 0.0
+        self._tail = np.concatenate([edges[:, 0], edges[:, 1]])
+        self._head = np.concatenate([edges[:, 1], edges[:, 0]])
+        self._spokes = rest[self._head] - rest[self._tail]
+        self._weight = np.tile(_positive_cotangents(rest, triangles, edges), 2)
+        self._m = m
+        self._cache = {}
 
-    def __call__(self, points):
-        covariance = np.stack([matrix @ points for matrix in self._moments], axis=2)
+    def _operators(self, groups):
+        """(moments M_0..2 (m, m), rest norms (m,), lonely (m,)) for ``groups`` (None: all spokes)."""
+        key = None if groups is None else groups.tobytes()
+        if key not in self._cache:
+            if len(self._cache) >= 8:
+                self._cache.pop(next(iter(self._cache)))
+            weight = self._weight
+            if groups is not None:
+                grouped = groups[self._tail] >= 0
+                inside = grouped & (groups[self._head] == groups[self._tail])
+                has_inside = np.bincount(self._tail[inside], minlength=self._m) > 0
+                weight = np.where(grouped & has_inside[self._tail] & ~inside, 0.0, weight)
+            n, tail, head = self._tail.size, self._tail, self._head
+            difference = sp.csr_matrix((np.r_[weight, -weight], (np.r_[np.arange(n), np.arange(n)], np.r_[head, tail])),
+                                       shape=(n, self._m))
+            group = sp.csr_matrix((np.ones(n), (tail, np.arange(n))), shape=(self._m, n))
+            # Covariance column j: M_j X with M_j = G diag(rest spoke coordinate j) (weighted differences).
+            moments = [sp.csr_matrix(group @ sp.diags(self._spokes[:, j]) @ difference) for j in range(3)]
+            norm = np.asarray(group @ (weight * np.einsum("ij,ij->i", self._spokes, self._spokes))).ravel()
+            self._cache[key] = (moments, norm, norm <= 0.0)
+        return self._cache[key]
+
+    def __call__(self, points, groups=None):
+        moments, norm, lonely = self._operators(groups)
+        covariance = np.stack([matrix @ points for matrix in moments], axis=2)
         rotations = best_rotations(covariance)
         trace = np.einsum("nij,nij->n", rotations, covariance)
-        scales = np.where(self._lonely, 1.0, trace / np.where(self._lonely, 1.0, self._rest_norm))
-        rotations[self._lonely] = np.eye(3)
+        scales = np.where(lonely, 1.0, trace / np.where(lonely, 1.0, norm))
+        rotations[lonely] = np.eye(3)
         return scales, rotations
 
 
@@ -116,7 +136,8 @@ def _pool():
 class Rebuild:
     """Holds W and rebuilds detail vertices from deformed proxy vertices.
 
-    ``__call__(points (m, 3))`` returns (n, 3) float64; ``out`` may be a preallocated array,
+    ``__call__(points (m, 3), out=None, groups=None)`` returns (n, 3) float64 (``groups``: rigid
+    groups of proxy vertices, see :class:`VertexSimilarities`); ``out`` may be a preallocated array,
     and a float32 ``out`` (what Blender stores) runs the product in float32 (half the memory
     traffic; rounding at the level of float32 storage itself).
     One single-vector product per coordinate runs about a third faster than one three-column
@@ -139,9 +160,10 @@ class Rebuild:
             [(a, b, matrix[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
         self._blocks32 = None
 
-    def frame_vectors(self, points):
-        """(3k, 3) V': row 3f + c is face f's rest scaled normal under corner c's similarity."""
-        scales, rotations = self._similarities(points)
+    def frame_vectors(self, points, groups=None):
+        """(3k, 3) V': row 3f + c is face f's rest scaled normal under corner c's similarity
+        (``groups``: see :class:`VertexSimilarities`)."""
+        scales, rotations = self._similarities(points, groups)
         corner = self.triangles.ravel()
         normals = np.repeat(self._rest_normals, 3, axis=0)
         turned = np.einsum("nij,nj->ni", rotations[corner], normals)
@@ -152,10 +174,10 @@ class Rebuild:
         for axis in range(3):
             out[start:stop, axis] = rows @ stacked[axis]
 
-    def __call__(self, points, out=None):
+    def __call__(self, points, out=None, groups=None):
         stacked = self._stacked
         stacked[:, :self.n_proxy] = points.T
-        stacked[:, self.n_proxy:] = self.frame_vectors(points).T
+        stacked[:, self.n_proxy:] = self.frame_vectors(points, groups).T
         if out is None:
             out = np.empty((self.n_detail, 3))
         blocks = self._blocks

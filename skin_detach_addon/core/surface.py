@@ -139,15 +139,23 @@ class SkinDetachedSurface:
         report(1.0, "done")
         return surface
 
-    def reconstruct(self, proxy_vertices, out=None):
+    def reconstruct(self, proxy_vertices, out=None, groups=None):
         """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
-        given: an (n, 3) float64 or float32 array (float32 computes in float32)."""
+        given: an (n, 3) float64 or float32 array (float32 computes in float32). ``groups`` (m,)
+        int, optional: label of the rigid group (handle or anchor) each proxy vertex was moved
+        with, -1 for none; detail carried by one group then moves exactly with it."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
+        if groups is not None:
+            groups = np.asarray(groups)
+            if groups.shape != (points.shape[0],) or groups.dtype.kind not in "iu":
+                raise SkinDetachError(f"groups: expected ({points.shape[0]},) integer labels, got "
+                                      f"{groups.shape} {groups.dtype}")
+            groups = groups.astype(np.int64)
         if out is not None and (not isinstance(out, np.ndarray) or out.shape != (self.n_detail, 3)
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        return self._rebuild(points, out=out)
+        return self._rebuild(points, out=out, groups=groups)
 
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
