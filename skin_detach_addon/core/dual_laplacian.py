@@ -26,7 +26,7 @@ rows; it depends only on which vertices are constrained), then, with volume kept
 along K^-1 grad V that restores the volume exactly, halved (backtracking) until the energy has
 not risen. So E never rises from one iterate to the next (``result.energy``); Anderson-mixed
 iterates are kept only when their energy is not above the plain step's start. It has
-converged when the mean squared change of the vertices in one iteration, over the squared
+converged when the largest squared move of a vertex in one iteration, over the squared
 bounding-box diagonal, is at most ``tol``. E is zero at rest, invariant under rigid motions
 and scales with the square of a uniform scale, so the solution follows both.
 
@@ -65,9 +65,9 @@ VOLUME_NEWTON_STEPS = 3
 ANDERSON_WINDOW = 5
 #: Continuation of the "rotated" solve: constrained vertices moving more than STAGE_JUMP of the
 #: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
-STAGE_JUMP = 0.05
+STAGE_JUMP = 0.1
 MAX_STAGES = 12
-STAGE_TOL = 1e-8
+STAGE_TOL = 1e-6
 #: Halvings of the step at most when the volume projection would raise the energy.
 VOLUME_BACKTRACKS = 12
 #: Stop when this many iterations in a row have not reached a new smallest change.
@@ -107,7 +107,8 @@ class _Anderson:
 class DualLaplacianResult:
     """vertices (m, 3) deformed proxy; iterations run; converged flag; volume_change
     V/V_rest - 1 over the closed components (nan if there is none); history (iterations,)
-    mean squared change of the vertices per iteration over the squared bounding-box diagonal."""
+    largest squared move of a vertex per iteration over the squared bounding-box diagonal;
+    energy (iterations + 1,) the energy at the start and after every iteration ("rotated" only)."""
 
     vertices: np.ndarray
     iterations: int
@@ -426,7 +427,7 @@ class DualLaplacian:
         """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3).
 
         ``initial`` (m, 3), e.g. the previous result while dragging, warm-starts the normals.
-        Stops when the mean squared change of the vertices in one iteration, over the squared
+        Stops when the largest squared move of a vertex in one iteration, over the squared
         bounding-box diagonal, is at most ``tol`` (converged), after ``max_iter`` iterations, or
         when :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
@@ -481,7 +482,7 @@ class DualLaplacian:
         for iterations in range(1, int(max_iter) + 1):
             mapped = step(current)
             residual = mapped - current
-            change = float(np.sum(residual * residual)) / (points.shape[0] * self.diagonal ** 2)
+            change = _largest_step(residual, self.diagonal)
             history.append(change)
             if change <= tol:
                 current = mapped
@@ -534,7 +535,6 @@ class DualLaplacian:
         free = self.free
         known = self._gram_fixed @ fixed_points
         keep_volume = self._closed.size > 0
-        scale = points.shape[0] * self.diagonal ** 2
 
         def energy_with(trial, pulled):
             """|B X - T|^2 at ``trial`` for the targets whose B^T T is ``pulled``."""
@@ -575,7 +575,7 @@ class DualLaplacian:
         for iterations in range(1, max_iter + 1):
             mapped, direction = global_step(with_free(current), targets, energy)
             residual = mapped - current
-            change = float(np.sum(residual * residual)) / scale
+            change = _largest_step(residual, self.diagonal)
             candidate = accelerator.next(current, mapped, change)
             if candidate is not mapped:
                 trial = with_free(candidate)
@@ -591,7 +591,7 @@ class DualLaplacian:
                 mapped_targets, mapped_energy = self._rotated_targets(with_free(mapped))
                 accepted = (mapped, mapped_targets, mapped_energy)
             moved = accepted[0] - current
-            change = float(np.sum(moved * moved)) / scale
+            change = _largest_step(moved, self.diagonal)
             current, targets, energy = accepted
             history.append(change)
             energies.append(energy)
@@ -600,6 +600,11 @@ class DualLaplacian:
                 break
         points[free] = current
         return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history, energies)
+
+
+def _largest_step(step, diagonal):
+    """Largest squared vertex move of ``step`` (r, 3) over the squared bounding-box diagonal."""
+    return float(np.max(np.einsum("ij,ij->i", step, step))) / diagonal ** 2 if step.size else 0.0
 
 
 def _cotangent_weights(points, faces, undirected):
