@@ -64,7 +64,13 @@ def find_object(bpy, api, name):
         if obj is None:
             raise BakeFailed(f"--object: expected an object of the file, got {name!r} (objects: "
                              f"{', '.join(sorted(o.name for o in bpy.data.objects if o.type == 'MESH')) or 'none'})")
-        return obj
+        mesh = api.mesh_of(obj)  # a proxy or a handle stands for its mesh
+        if mesh is None or mesh.type != 'MESH':
+            raise BakeFailed(f"--object: expected a mesh object (or its proxy or a handle), got {name!r} of type "
+                             f"{obj.type}")
+        if mesh != obj:
+            print(f"bake: {name!r} belongs to {mesh.name!r}; baking that mesh", flush=True)
+        return mesh
     bound = api.bound_objects()
     if len(bound) != 1:
         raise BakeFailed(f"--object: expected one bound mesh in the file to pick, found {len(bound)} "
@@ -93,6 +99,10 @@ def run(args):
         if not os.path.isfile(args.blend):
             raise BakeFailed(f"--blend: expected an existing .blend file, got {args.blend!r}")
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    source = bpy.data.filepath
+    if source and os.path.exists(args.output) and os.path.samefile(args.output, source):
+        raise BakeFailed(f"--output: expected a file other than the source .blend, got {args.output!r} (it would "
+                         f"overwrite the source)")
     scene = bpy.context.scene
     obj = find_object(bpy, api, args.object)
     if bpy.context.view_layer.objects.active is None:
@@ -100,7 +110,7 @@ def run(args):
     to_blend = args.output.lower().endswith(".blend")
     if to_blend:
         api.check_output_file("--output", args.output)
-    frames = args.frames or f"{scene.frame_start}-{scene.frame_end}"
+    frames = api.frame_list(args.frames or f"{scene.frame_start}-{scene.frame_end}")  # refused before any work
     built = ensure_binding(api, obj, args)
     into = {"shape-keys": api.SHAPE_KEYS, "objects": api.OBJECTS}[args.into] if to_blend else api.FILES
     start = time.perf_counter()

@@ -28,9 +28,9 @@ from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
-           "remove_handle", "rest_positions", "figures", "bound_objects", "selected_vertices", "check_output_file", "DragSession",
-           "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL", "SETTLE_TOL",
-           "RUNNING", "FINISHED", "CANCELLED"]
+           "remove_handle", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
+           "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
+           "SETTLE_TOL", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
 
@@ -58,8 +58,8 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     ``progress(fraction, stage)`` is called as the build goes."""
     obj = _owner(obj)
     skin_rig.check_mesh_object(obj)
-    if obj.mode == 'EDIT':
-        raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, it is in Edit Mode")
+    if obj.mode == 'EDIT' or obj.data.is_editmode:
+        raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
     return skin_rig.build(obj, target_faces, normal_test, progress)
 
 
@@ -199,6 +199,12 @@ def selected_vertices(context):
     (the mesh's Edit Mode selection, Edit Mode left first, or its proxy's): (obj, vertex ids (k,),
     on_proxy)."""
     return skin_rig.selection(context)
+
+
+def frame_list(frames):
+    """``frames`` (``"1-250"``, ``"1-10,20"`` or an iterable of ints) as a list of distinct frame
+    numbers in order; absurd ranges are refused (see :func:`bake`)."""
+    return baking.check_frames(frames)
 
 
 def check_output_file(argument, path):

@@ -36,3 +36,15 @@ def test_recovers_a_known_rotation_and_survives_degenerate_input():
     rank_one = best_rotations(np.outer([1.0, 2.0, 3.0], [0.0, 1.0, 1.0])[None])
     for rotation in np.concatenate([zero, rank_one]):
         assert np.isfinite(rotation).all() and abs(np.linalg.det(rotation) - 1.0) <= 1e-12
+
+
+def test_warm_started_rotations_equal_cold_ones():
+    from skin_detach_addon.core.rotations import WarmRotations
+    rng = np.random.default_rng(5)
+    covariance = rng.normal(size=(300, 3, 3))
+    warm = WarmRotations()
+    first = warm(covariance)
+    nearby = covariance + 1e-3 * rng.normal(size=covariance.shape)
+    assert np.abs(first - best_rotations(covariance)).max() <= 1e-12
+    assert np.abs(warm(nearby) - best_rotations(nearby)).max() <= 1e-10
+    assert np.abs(warm(covariance[:10]) - best_rotations(covariance[:10])).max() <= 1e-12  # other size: cold

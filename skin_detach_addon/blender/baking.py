@@ -30,18 +30,31 @@ BAKE_TAG = "_skin_detach_bake"
 FORMATS = (".obj", ".ply")
 
 
+#: A bake takes at most this many frames (a larger range is refused before any frame is solved).
+MAX_FRAMES = 100_000
+
+
 def parse_frames(text):
-    """Frame numbers from ``"1-250"``, ``"12"`` or ``"1-10,20,30-40"`` (inclusive, in order, no repeats)."""
-    frames = []
+    """Frame numbers from ``"1-250"``, ``"12"`` or ``"1-10,20,30-40"`` (inclusive, in order, no
+    repeats); at most :data:`MAX_FRAMES` of them."""
+    frames, seen, work = [], set(), 0
     for part in str(text).replace(" ", "").split(","):
-        match = re.fullmatch(r"(-?\d+)(?:-(-?\d+))?", part)
+        match = re.fullmatch(r"(-?\d{1,9})(?:-(-?\d{1,9}))?", part)
         if match is None:
             raise SkinDetachError(f"frames: expected a frame or range like '1-250' or '1-10,20', got {text!r}")
         first = int(match.group(1))
         last = int(match.group(2)) if match.group(2) is not None else first
         if last < first:
             raise SkinDetachError(f"frames: expected a range that does not run backwards, got {part!r}")
-        frames.extend(f for f in range(first, last + 1) if f not in frames)
+        work += last - first + 1
+        if last - first + 1 > MAX_FRAMES or work > 10 * MAX_FRAMES:
+            raise SkinDetachError(f"frames: expected at most {MAX_FRAMES:,} frames, got {text!r}")
+        for frame in range(first, last + 1):
+            if frame not in seen:
+                seen.add(frame)
+                frames.append(frame)
+        if len(frames) > MAX_FRAMES:
+            raise SkinDetachError(f"frames: expected at most {MAX_FRAMES:,} frames, got {text!r}")
     return frames
 
 
@@ -56,16 +69,24 @@ def check_frames(frames):
         raise SkinDetachError(f"frames: expected frame numbers, got {frames!r}") from None
     if not values or any(v != f for v, f in zip(values, frames)):
         raise SkinDetachError(f"frames: expected at least one whole frame number, got {frames!r}")
-    return list(dict.fromkeys(values))
+    values = list(dict.fromkeys(values))
+    if len(values) > MAX_FRAMES:
+        raise SkinDetachError(f"frames: expected at most {MAX_FRAMES:,} frames, got {len(values):,}")
+    return values
 
 
 def file_path(pattern, frame):
-    """The file of ``frame`` for ``pattern``: a run of ``#`` becomes the zero-padded frame
-    (``out/bunny_####.obj`` -> ``out/bunny_0012.obj``); without ``#``, ``_####`` goes before the extension."""
-    if "#" not in pattern:
-        root, ext = os.path.splitext(pattern)
-        pattern = f"{root}_####{ext}"
-    return re.sub(r"#+", lambda m: f"{frame:0{len(m.group(0))}d}", pattern)
+    """The file of ``frame`` for ``pattern``: the last run of ``#`` in the file name becomes the
+    zero-padded frame (``out/bunny_####.obj`` -> ``out/bunny_0012.obj``; other ``#`` stay as they
+    are); without ``#`` in the file name, ``_####`` goes before the extension."""
+    folder, name = os.path.split(pattern)
+    if "#" not in name:
+        root, ext = os.path.splitext(name)
+        name = f"{root}_####{ext}"
+    runs = list(re.finditer(r"#+", name))
+    last = runs[-1]
+    name = f"{name[:last.start()]}{frame:0{len(last.group(0))}d}{name[last.end():]}"
+    return os.path.join(folder, name) if folder else name
 
 
 def check_output(pattern):

@@ -19,6 +19,8 @@ from ..core.surface import SkinDetachedSurface
 from . import mesh_io
 
 KEY = "_skin_detach"
+#: A proxy object points back at its mesh under this key.
+PROXY_TAG = "_skin_detach_proxy_of"
 #: Iterations a proxy solve may take before it reports that it did not converge.
 MAX_ITERATIONS = 300
 SCHEMA_VERSION = 1
@@ -98,6 +100,27 @@ def store(obj, surface, rest, proxy):
     return binding
 
 
+def check_editable(obj, what="object"):
+    """Raise unless ``obj`` and its data can be changed and saved here (not linked from a library,
+    not a library override's read-only part)."""
+    for block in (obj, getattr(obj, "data", None)):
+        if block is None:
+            continue
+        if getattr(block, "library", None) is not None or not getattr(block, "is_editable", True):
+            raise SkinDetachError(f"{what} {obj.name!r}: expected local, editable data, got data linked from "
+                                  f"{getattr(getattr(block, 'library', None), 'filepath', 'a library')!r}; make it "
+                                  f"local first (Object > Relations > Make Local)")
+
+
+def _stored(obj):
+    """The stored property group of ``obj`` (raises when it is not one)."""
+    props = obj[KEY]
+    if not hasattr(props, "get") or not hasattr(props, "keys"):
+        raise SkinDetachError(f"object {obj.name!r}: expected a Skin Detach binding group in {KEY!r}, got "
+                              f"{type(props).__name__}; press Rebuild")
+    return props
+
+
 def open_binding(obj):
     """:class:`Binding` of ``obj`` after checking that it still fits the mesh and the proxy exists.
     Raises :class:`SkinDetachError` that says to rebuild when it does not."""
@@ -105,47 +128,82 @@ def open_binding(obj):
         raise SkinDetachError(f"object: expected a mesh object, got {_describe(obj)}")
     if KEY not in obj:
         raise SkinDetachError(f"object {obj.name!r}: expected a Skin Detach binding, it has none; press Build first")
-    props = obj[KEY]
+    check_editable(obj)
+    props = _stored(obj)
     version = props.get("schema_version", -1)
     if version != SCHEMA_VERSION:
         raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {SCHEMA_VERSION}, got {version}; "
                               f"press Rebuild")
-    if obj.mode == 'EDIT':
-        raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode (Skin Detach never "
-                              f"writes a mesh under Edit Mode)")
+    if obj.mode == 'EDIT' or obj.data.is_editmode:
+        raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, its mesh is in Edit Mode (Skin Detach "
+                              f"never writes a mesh under Edit Mode)")
+    if not obj.users_scene:
+        raise SkinDetachError(f"object {obj.name!r}: expected it in a scene, it was unlinked from every scene")
+    n = len(obj.data.vertices)
     fingerprint = mesh_io.mesh_fingerprint(obj.data)
     if fingerprint != props.get("mesh_fingerprint"):
-        raise SkinDetachError(f"mesh {obj.data.name!r}: expected the topology it was bound with "
-                              f"({len(props['rest']) // 3} vertices), the mesh was edited after binding "
-                              f"(now {len(obj.data.vertices)} vertices, or its faces changed); press Rebuild")
+        raise SkinDetachError(f"mesh {obj.data.name!r}: expected the topology it was bound with, the mesh was "
+                              f"edited after binding (now {n} vertices, or its faces changed); press Rebuild")
+    binding_id = props.get("binding_id")
+    if not isinstance(binding_id, str) or not binding_id:
+        raise SkinDetachError(f"object {obj.name!r}: expected a binding id, got {binding_id!r}; press Rebuild")
     proxy = proxy_of(obj)
     if proxy is None:
         raise SkinDetachError(f"object {obj.name!r}: expected its proxy object, it was deleted; press Rebuild")
-    binding = _CACHE.get(props["binding_id"])
+    if proxy.type != 'MESH' or proxy.get(PROXY_TAG) != obj:
+        owner = proxy.get(PROXY_TAG)
+        raise SkinDetachError(f"object {obj.name!r}: expected its own proxy, the stored one ({proxy.name!r}) belongs "
+                              f"to {getattr(owner, 'name', 'no mesh')!r} (a copy of a bound object?); press Rebuild "
+                              f"to bind this one")
+    check_editable(proxy, "proxy")
+    if proxy.mode == 'EDIT' or proxy.data.is_editmode:
+        raise SkinDetachError(f"proxy {proxy.name!r}: expected Object Mode, it is in Edit Mode; leave Edit Mode first")
+    binding = _CACHE.get(binding_id)
     if binding is None:
         arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
                   for key, value in props.items() if key != "proxy"}
         surface = SkinDetachedSurface.from_arrays(arrays, source=f"binding of {obj.name!r}")
-        binding = Binding(props["binding_id"], surface, rest_positions(obj), proxy)
+        rest = _checked_rest(obj, props, n)
+        if surface.n_detail != n:
+            raise SkinDetachError(f"binding of {obj.name!r}: expected a skin over the mesh's {n} vertices, got "
+                                  f"{surface.n_detail}; press Rebuild")
+        binding = Binding(binding_id, surface, rest, proxy)
         _CACHE[binding.binding_id] = binding
     binding.proxy = proxy  # never keep a Blender reference across undo or reload
     return binding
+
+
+def _checked_rest(obj, props, n):
+    try:
+        rest = np.asarray(props["rest"], dtype=np.float32).reshape(-1, 3)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SkinDetachError(f"binding of {obj.name!r}: expected stored rest positions ({n}, 3), got unreadable "
+                              f"data ({exc}); press Rebuild") from None
+    if rest.shape != (n, 3):
+        raise SkinDetachError(f"binding of {obj.name!r}: expected stored rest positions ({n}, 3), got {rest.shape}; "
+                              f"press Rebuild")
+    if not np.isfinite(rest).all():
+        raise SkinDetachError(f"binding of {obj.name!r}: expected finite stored rest positions, got NaN or inf; "
+                              f"press Rebuild")
+    return rest
 
 
 def proxy_of(obj):
     """The proxy object of ``obj``, or None when it has none or it was deleted."""
     if not has_binding(obj):
         return None
-    proxy = obj[KEY].get("proxy")
+    props = obj[KEY]
+    proxy = props.get("proxy") if hasattr(props, "get") else None
     # Deleting an object in the viewport unlinks it; the pointer here may keep an orphan alive.
-    if proxy is None or not proxy.users_scene:
+    if proxy is None or not hasattr(proxy, "users_scene") or getattr(proxy, "type", None) is None \
+            or not proxy.users_scene:
         return None
     return proxy
 
 
 def check_unedited(obj):
     """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
-    if mesh_io.positions_digest(mesh_io.read_positions(obj.data)) != obj[KEY].get("written_digest"):
+    if mesh_io.positions_digest(mesh_io.read_positions(obj.data)) != _stored(obj).get("written_digest"):
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected the positions Skin Detach last wrote, they were "
                               f"edited since (sculpt or Edit Mode?); press Rebuild to bind the new shape, or Reset "
                               f"to return to the bound rest shape")
@@ -166,13 +224,16 @@ def set_written_digest(obj, digest):
 
 
 def rest_positions(obj):
-    """(n, 3) float32 rest positions ``obj`` was bound with, in its mesh's vertex order."""
-    return np.asarray(obj[KEY]["rest"], dtype=np.float32).reshape(-1, 3)
+    """(n, 3) float32 rest positions ``obj`` was bound with, in its mesh's vertex order (checked)."""
+    return _checked_rest(obj, _stored(obj), len(obj.data.vertices))
 
 
 def binding_id(obj):
     """The id of ``obj``'s binding (changes with every Build), or None without one."""
-    return obj[KEY].get("binding_id") if has_binding(obj) else None
+    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
+        return None
+    value = obj[KEY].get("binding_id")
+    return value if isinstance(value, str) else None
 
 
 def last_step(obj):
@@ -182,8 +243,14 @@ def last_step(obj):
 
 
 def stats_of(obj):
-    """The core build figures stored with the binding (dict), or {}."""
-    return json.loads(obj[KEY]["stats"]) if has_binding(obj) and "stats" in obj[KEY] else {}
+    """The core build figures stored with the binding (dict), or {} (also when unreadable)."""
+    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
+        return {}
+    try:
+        stats = json.loads(str(obj[KEY].get("stats", "{}")))
+    except ValueError:
+        return {}
+    return stats if isinstance(stats, dict) else {}
 
 
 def forget(obj):

@@ -10,6 +10,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from . import binding as stored
@@ -96,6 +97,15 @@ class Deformation:
         return report
 
     def _write(self, detail, proxy_positions):
+        """Write the mesh and the proxy, or neither: every check comes first."""
+        for name, values in (("rebuilt positions", detail), ("proxy positions", proxy_positions)):
+            if not np.isfinite(values).all():
+                raise SkinDetachError(f"object {self.obj.name!r}: expected finite {name}, the solve gave NaN or "
+                                      f"inf (nothing was written); check the handles' transforms")
+        for target in (self.obj, self.proxy):
+            if target.mode == 'EDIT' or target.data.is_editmode:
+                raise SkinDetachError(f"object {target.name!r}: expected Object Mode, its mesh is in Edit Mode "
+                                      f"(nothing was written)")
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
         stored.mark_written(self.obj, detail)
@@ -117,8 +127,32 @@ class Deformation:
         self.binding.forget_warm_starts()
 
     def reset(self):
-        """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame."""
-        for empty in self.handles():
-            handles.put_at_rest(empty)
+        """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame.
+        Refuses when the mesh now holds the rest shape under another transform (Apply Scale or
+        Rotation after binding): writing the rest would change its size or pose in the world."""
+        self._check_no_applied_transform()
+        empties = self.handles()
+        frames = [handles.rest_local_of(empty) for empty in empties]  # all checked before anything moves
         self._write(self.binding.rest, self.binding.surface.proxy_vertices)
+        for empty, frame in zip(empties, frames):
+            empty.matrix_basis = Matrix(frame.tolist())
         self.binding.forget_warm_starts()
+
+    def _check_no_applied_transform(self):
+        current = mesh_io.read_positions(self.obj.data).astype(np.float64)
+        rest = self.binding.rest.astype(np.float64)
+        if np.array_equal(current, rest) or current.shape[0] < 4:
+            return
+        # Least-squares affine map rest -> current; exact (to float32 rounding) and not the identity
+        # means the object's transform was applied into the mesh.
+        ones = np.ones((rest.shape[0], 1))
+        centre = rest.mean(axis=0)
+        design = np.hstack([rest - centre, ones])
+        solution, *_ = np.linalg.lstsq(design, current, rcond=None)
+        residual = np.abs(design @ solution - current).max()
+        size = max(float(np.ptp(rest, axis=0).max()), 1e-30)
+        linear = solution[:3].T
+        if residual <= 1e-5 * size and np.abs(linear - np.eye(3)).max() > 1e-4:
+            raise SkinDetachError(f"mesh {self.obj.data.name!r}: expected the bound rest shape or a sculpted one, "
+                                  f"it holds the rest shape under another scale or rotation (Apply Scale/Rotation "
+                                  f"after binding?); press Rebuild to bind it as it is (Reset would change its size)")

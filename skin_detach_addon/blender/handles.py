@@ -14,6 +14,8 @@ from mathutils import Matrix
 from ..core.errors import SkinDetachError
 
 TAG = "_skin_detach_handle"
+#: Handle targets farther than this from the object's origin are refused (float32 stores the mesh).
+MAX_COORDINATE = 1e12
 HANDLE = "HANDLE"
 ANCHOR = "ANCHOR"
 
@@ -24,38 +26,69 @@ def is_handle(obj):
 
 def owner(empty):
     """The bound mesh object a handle or anchor empty belongs to (None if it is none)."""
-    return empty[TAG].get("owner") if is_handle(empty) else None
+    found = _get(empty, "owner") if is_handle(empty) else None
+    return found if getattr(found, "type", None) is not None else None
 
 
 def kind_of(empty):
-    """HANDLE or ANCHOR."""
-    return empty[TAG]["kind"]
+    """HANDLE or ANCHOR (raises for anything else)."""
+    kind = _get(empty, "kind")
+    if kind not in (HANDLE, ANCHOR):
+        raise SkinDetachError(f"handle {empty.name!r}: expected kind {HANDLE!r} or {ANCHOR!r}, got {kind!r}; "
+                              f"remove it")
+    return kind
 
 
-def proxy_ids_of(empty):
-    """(c,) int64 proxy vertex ids the empty holds."""
-    return np.asarray(empty[TAG]["proxy_ids"], dtype=np.int64)
+def _ids(empty, key, limit=None):
+    raw = np.asarray(_get(empty, key, []))
+    if raw.size and raw.dtype.kind not in "iu":
+        raise SkinDetachError(f"handle {empty.name!r}: expected integer {key}, got {raw.dtype}; remove it")
+    ids = raw.astype(np.int64).ravel()
+    if ids.size and (ids.min() < 0 or (limit is not None and ids.max() >= limit)):
+        raise SkinDetachError(f"handle {empty.name!r}: expected {key} in [0, {limit}), got values in "
+                              f"[{ids.min()}, {ids.max()}]; remove it or Rebuild")
+    return ids
 
 
-def detail_ids_of(empty):
+def proxy_ids_of(empty, m=None):
+    """(c,) int64 proxy vertex ids the empty holds (checked against ``m`` proxy vertices if given)."""
+    return _ids(empty, "proxy_ids", m)
+
+
+def detail_ids_of(empty, n=None):
     """(k,) int64 detail vertex ids the empty was made from (empty when made from the proxy)."""
-    return np.asarray(empty[TAG]["detail_ids"], dtype=np.int64)
+    return _ids(empty, "detail_ids", n)
 
 
 def rest_local_of(empty):
     """(4, 4) float64 rest frame of the empty in the bound object's local space."""
-    return np.asarray(empty[TAG]["rest_local"], dtype=np.float64).reshape(4, 4)
-
-
-def put_at_rest(empty):
-    """The empty back at its rest frame."""
-    empty.matrix_basis = Matrix(rest_local_of(empty).tolist())
+    try:
+        frame = np.asarray(_get(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
+    except (TypeError, ValueError):
+        frame = np.full((4, 4), np.nan)
+    if not np.isfinite(frame).all():
+        raise SkinDetachError(f"handle {empty.name!r}: expected a finite 4x4 rest frame, got unreadable or "
+                              f"non-finite values; remove it")
+    return frame
 
 
 def handles_of(obj, proxy=None):
-    """Handle and anchor empties of ``obj``, sorted by name (later names win on shared vertices)."""
+    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices)."""
     pool = proxy.children if proxy is not None else _all_objects()
-    return sorted((o for o in pool if is_handle(o) and o[TAG].get("owner") == obj), key=lambda o: o.name)
+    return sorted((o for o in pool if is_handle(o) and _get(o, "owner") == obj), key=_age)
+
+
+def _get(empty, key, default=None):
+    tag = empty[TAG]
+    return tag.get(key, default) if hasattr(tag, "get") else default
+
+
+def _age(empty):
+    """Sort key: the creation serial, then the name's number (files from before serials), then the name."""
+    serial = _get(empty, "serial")
+    digits = empty.name.rsplit("_", 1)[-1]
+    number = int(digits) if digits.isdigit() else 0
+    return (serial if isinstance(serial, int) else -1, number, empty.name)
 
 
 def _all_objects():
@@ -86,8 +119,10 @@ def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None,
     empty.matrix_basis = Matrix.Translation(now_centroid.tolist())
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
+    serials = [_get(o, "serial") for o in handles_of(obj, proxy)]
     empty[TAG] = {
         "owner": obj,
+        "serial": 1 + max([v for v in serials if isinstance(v, int)], default=0),
         "kind": kind,
         "proxy_ids": ids.astype(np.int32),
         "detail_ids": np.asarray(detail_ids if detail_ids is not None else [], dtype=np.int32),
@@ -126,28 +161,36 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
 def local_motion(obj, empty):
     """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made."""
     world = np.array(obj.matrix_world, dtype=np.float64)
-    return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ np.linalg.inv(rest_local_of(empty))
+    try:
+        return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ \
+            np.linalg.inv(rest_local_of(empty))
+    except np.linalg.LinAlgError:
+        raise SkinDetachError(f"object {obj.name!r}: expected an invertible transform (no zero scale) for its "
+                              f"handle {empty.name!r}, got a singular one") from None
 
 
 def constraints(obj, empties, rest_proxy):
     """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, and the rigid group
     of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), from the handle
     and anchor ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later
-    handle overrides an earlier."""
+    handle overrides an older one."""
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
     for label, empty in enumerate(sorted(empties, key=lambda e: kind_of(e) == HANDLE), start=1):
-        ids = proxy_ids_of(empty)
-        if ids.size == 0 or ids.max() >= m:
-            raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids below {m}, "
-                                  f"got {ids.max() if ids.size else 'none'}; remove it or Rebuild")
+        ids = proxy_ids_of(empty, m)
+        if ids.size == 0:
+            raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids, got none; remove it or Rebuild")
         if kind_of(empty) == HANDLE:
             motion = local_motion(obj, empty)
-            if not np.isfinite(motion).all():
-                raise SkinDetachError(f"handle {empty.name!r}: expected an invertible transform, got a degenerate one")
-            targets[ids] = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
+            moved = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
+            if not np.isfinite(motion).all() or not np.isfinite(moved).all() or \
+                    np.abs(moved).max() > MAX_COORDINATE:
+                raise SkinDetachError(f"handle {empty.name!r}: expected a transform that keeps its vertices finite "
+                                      f"and within {MAX_COORDINATE:g} of the origin, got one that moves them to "
+                                      f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
+            targets[ids] = moved
             groups[ids] = label
         else:
             targets[ids] = rest_proxy[ids]

@@ -12,7 +12,7 @@ from . import binding as stored
 from . import handles, mesh_io
 
 RIG_COLLECTION = "Skin Detach"
-PROXY_TAG = "_skin_detach_proxy_of"
+PROXY_TAG = stored.PROXY_TAG
 
 
 def check_mesh_object(obj):
@@ -24,6 +24,7 @@ def check_mesh_object(obj):
     if PROXY_TAG in obj:
         raise SkinDetachError(f"object {obj.name!r}: expected a detail mesh, got a Skin Detach proxy; "
                               f"select the original mesh")
+    stored.check_editable(obj)
     if len(obj.data.vertices) == 0 or len(obj.data.polygons) == 0:
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected vertices and faces, got "
                               f"{len(obj.data.vertices)} vertices and {len(obj.data.polygons)} faces")

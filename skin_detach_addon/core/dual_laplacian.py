@@ -45,7 +45,7 @@ from scipy.sparse.linalg import splu
 from .errors import SkinDetachError
 from .geometry import (barycentric, bbox_diagonal, component_labels, cross_rows, signed_volumes, unique_edges,
                        unit_rows)
-from .rotations import best_rotations
+from .rotations import WarmRotations
 from .validation import as_points, as_triangles, as_vertex_ids
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
@@ -322,6 +322,7 @@ class DualLaplacian:
         self._moments_t = [matrix.T.tocsr() for matrix in self._moments]
         self._gram = sp.csr_matrix(b.T @ b)  # K = B^T B (m x m): |B X - T|^2 = X.K X - 2 X.B^T T + |T|^2
         self._rest_norm = float(np.sum(rest_rows * rest_rows))  # |T|^2: rotations keep lengths
+        self._rotations = WarmRotations()
         b_free = b[:, self.free].tocsc()
         self._gram_fixed = sp.csr_matrix(b_free.T @ b[:, self.fixed])
         self._factor(b_free.T @ b_free)
@@ -503,7 +504,7 @@ class DualLaplacian:
         with rigidity, vertex one-rings); returns B^T T (m, 3) for the rows' targets T (the
         rotated rest rows) and the energy |B X - T|^2 (the least over all rotations)."""
         covariance = np.stack([matrix @ points for matrix in self._moments], axis=2)  # (g, 3, 3)
-        rotations = best_rotations(covariance)
+        rotations = self._rotations(covariance)
         pulled = self._moments_t[0] @ rotations[:, :, 0]
         pulled += self._moments_t[1] @ rotations[:, :, 1]
         pulled += self._moments_t[2] @ rotations[:, :, 2]

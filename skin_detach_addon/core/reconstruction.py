@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .geometry import face_cross, unique_edges
-from .rotations import best_rotations
+from .rotations import WarmRotations
 
 
 def scaled_normals(points, triangles):
@@ -49,6 +49,7 @@ class VertexSimilarities:
         self._weight = np.tile(_positive_cotangents(rest, triangles, edges), 2)
         self._m = m
         self._cache = {}
+        self._rotations = WarmRotations()
 
     def _operators(self, groups):
         """(moments M_0..2 (m, m), rest norms (m,), lonely (m,)) for ``groups`` (None: all spokes)."""
@@ -75,7 +76,7 @@ class VertexSimilarities:
     def __call__(self, points, groups=None):
         moments, norm, lonely = self._operators(groups)
         covariance = np.stack([matrix @ points for matrix in moments], axis=2)
-        rotations = best_rotations(covariance)
+        rotations = self._rotations(covariance)
         trace = np.einsum("nij,nij->n", rotations, covariance)
         scales = np.where(lonely, 1.0, trace / np.where(lonely, 1.0, norm))
         rotations[lonely] = np.eye(3)

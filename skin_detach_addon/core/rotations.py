@@ -77,12 +77,42 @@ def _unit(x, y, z):
 
 def best_rotations(covariance):
     """(r, 3, 3) proper rotations R_i maximising trace(R_i^T C_i) for ``covariance`` (r, 3, 3)."""
+    return _fit(covariance, None)[0]
+
+
+class WarmRotations:
+    """:func:`best_rotations` for a sequence of nearby covariances of the same r sets (the
+    iterations of a solve): each call starts the Jacobi sweeps from the eigenvectors of the
+    last, so one sweep usually suffices; the rotations are the same as a cold call's."""
+
+    def __init__(self):
+        self._guess = None
+
+    def __call__(self, covariance):
+        guess = self._guess if self._guess is not None and self._guess.shape[0] == len(covariance) else None
+        rotations, self._guess = _fit(covariance, guess)
+        return rotations
+
+
+def _fit(covariance, guess):
+    """(rotations (r, 3, 3), eigenvectors of C^T C (r, 3, 3)) for ``covariance`` (r, 3, 3); the
+    sweeps start from the orthonormal ``guess`` (r, 3, 3) when given."""
     c = np.ascontiguousarray(covariance, dtype=np.float64).reshape(-1, 9)
     r = c.shape[0]
     cc = [c[:, k] for k in range(9)]  # cc[3 i + j] = C_ij
-    # The six entries of C^T C, then its eigenvectors (columns of v).
-    a = {(i, j): cc[i] * cc[j] + cc[3 + i] * cc[3 + j] + cc[6 + i] * cc[6 + j] for i in range(3) for j in range(i, 3)}
+    work = cc
+    if guess is not None:
+        g = np.ascontiguousarray(guess, dtype=np.float64).reshape(-1, 9)
+        gg = [g[:, k] for k in range(9)]
+        work = [cc[3 * i] * gg[j] + cc[3 * i + 1] * gg[3 + j] + cc[3 * i + 2] * gg[6 + j]
+                for i in range(3) for j in range(3)]
+    # The six entries of W^T W (W = C G), then its eigenvectors (columns of v).
+    a = {(i, j): work[i] * work[j] + work[3 + i] * work[3 + j] + work[6 + i] * work[6 + j]
+         for i in range(3) for j in range(i, 3)}
     v = _jacobi(a, r)
+    if guess is not None:  # back to eigenvectors of C^T C: G v
+        v = [[gg[3 * i] * v[0][j] + gg[3 * i + 1] * v[1][j] + gg[3 * i + 2] * v[2][j] for j in range(3)]
+             for i in range(3)]
     lam = [a[0, 0], a[1, 1], a[2, 2]]
     # Column of the largest eigenvalue (first) and of the middle one (second).
     first = np.where(lam[0] >= lam[1], np.where(lam[0] >= lam[2], 0, 2), np.where(lam[1] >= lam[2], 1, 2))
@@ -115,4 +145,8 @@ def best_rotations(covariance):
     for i in range(3):
         for j in range(3):
             out[:, i, j] = u1[i] * v1[j] + u2[i] * v2[j] + u3[i] * v3[j]
-    return out
+    eigenvectors = np.empty((r, 3, 3))
+    for i in range(3):
+        for j in range(3):
+            eigenvectors[:, i, j] = v[i][j]
+    return out, eigenvectors

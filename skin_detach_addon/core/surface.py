@@ -26,6 +26,8 @@ FORMAT_TAG = "skin_detach_surface"
 NORMAL_TEST_OVERSAMPLE = 1.5
 
 _SKIN_FIELDS = ("vertex", "face", "bary", "height", "weight", "case")
+#: Stored barycentrics, heights and weights above this magnitude are refused as corrupt.
+MAX_STORED_COEFFICIENT = 1e6
 
 
 def topology_fingerprint(n_vertices, triangles):
@@ -179,7 +181,19 @@ class SkinDetachedSurface:
     @classmethod
     def from_arrays(cls, arrays, source="arrays"):
         """Check and read a dict written by :meth:`to_arrays` (index arrays may come back as int32,
-        flat arrays are reshaped); ``source`` names where it came from in error messages."""
+        flat arrays are reshaped); ``source`` names where it came from in error messages. Anything
+        malformed (wrong types or shapes, non-finite or absurd numbers, indices out of range,
+        unreadable figures) raises :class:`SkinDetachError`."""
+        try:
+            return cls._from_arrays(arrays, source)
+        except SkinDetachError:
+            raise
+        except (TypeError, ValueError, KeyError, AttributeError, IndexError, OverflowError) as exc:
+            raise SkinDetachError(f"{source}: expected the arrays of a Skin Detach binding, got malformed data "
+                                  f"({type(exc).__name__}: {exc}); rebuild the skin") from None
+
+    @classmethod
+    def _from_arrays(cls, arrays, source):
         if str(arrays.get("format_tag", "")) != FORMAT_TAG:
             raise SkinDetachError(f"{source}: expected format_tag {FORMAT_TAG!r}, got {str(arrays.get('format_tag'))!r}")
         version = int(arrays.get("format_version", -1))
@@ -196,6 +210,13 @@ class SkinDetachedSurface:
                     height=np.asarray(arrays["skin_height"], dtype=np.float64).ravel(),
                     weight=np.asarray(arrays["skin_weight"], dtype=np.float64).ravel(),
                     case=np.asarray(arrays["skin_case"]).astype(np.int8).ravel())
+        for name in ("bary", "height", "weight"):
+            values = getattr(skin, name)
+            if not np.isfinite(values).all() or (values.size and np.abs(values).max() > MAX_STORED_COEFFICIENT):
+                raise SkinDetachError(f"{source}: expected finite skin_{name} of magnitude at most "
+                                      f"{MAX_STORED_COEFFICIENT:g}, got NaN, inf or absurd values; rebuild the skin")
+        if skin.weight.size and skin.weight.min() < 0:
+            raise SkinDetachError(f"{source}: expected skin_weight >= 0, got {skin.weight.min():g}; rebuild the skin")
         n_assoc = skin.vertex.shape[0]
         if not (skin.face.shape[0] == skin.bary.shape[0] == skin.height.shape[0] == skin.weight.shape[0] == n_assoc):
             raise SkinDetachError(f"{source}: expected skin arrays of {n_assoc} associations each, got lengths "
@@ -212,8 +233,10 @@ class SkinDetachedSurface:
         if weld.size and (weld.min() < 0 or weld.max() >= skin.case.shape[0]):
             raise SkinDetachError(f"{source}: expected weld to index the {skin.case.shape[0]} welded vertices, "
                                   f"got values out of range")
-        return cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin,
-                   str(arrays["fingerprint"]), json.loads(str(arrays["stats"])))
+        stats = json.loads(str(arrays["stats"]))
+        if not isinstance(stats, dict):
+            raise SkinDetachError(f"{source}: expected the build figures as a JSON object, got {type(stats).__name__}")
+        return cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin, str(arrays["fingerprint"]), stats)
 
     def save(self, path):
         """Write an .npz file (no pickled objects) that :meth:`load` reads back."""

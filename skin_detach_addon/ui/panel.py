@@ -37,7 +37,10 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row.operator("skin_detach.add_anchor", icon='PINNED')
         for empty in api.handles_of(obj):
             row = box.row(align=True)
-            icon = 'EMPTY_AXIS' if api.handle_kind(empty) == api.HANDLE else 'PINNED'
+            try:
+                icon = 'EMPTY_AXIS' if api.handle_kind(empty) == api.HANDLE else 'PINNED'
+            except api.SkinDetachError:
+                icon = 'ERROR'  # a damaged handle: listed so that it can be removed
             select = row.operator("skin_detach.select_handle", text=empty.name, icon=icon,
                                   depress=empty == context.active_object)
             select.name = empty.name

@@ -1,0 +1,233 @@
+"""Adversarial cases (headless bpy, small meshes): each is refused with SkinDetachError and leaves
+every mesh in the file bit-identical, or works and writes only finite, documented results."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import activate, import_spot, rig  # noqa: E402
+
+from skin_detach_addon import api  # noqa: E402
+from skin_detach_addon.api import SkinDetachError  # noqa: E402
+from skin_detach_addon.blender import baking, binding, handles  # noqa: E402
+
+
+def meshes():
+    """Every mesh's positions and shape keys in the file, by name."""
+    out = {}
+    for mesh in bpy.data.meshes:
+        data = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+        mesh.vertices.foreach_get("co", data)  # also readable while the mesh is in Edit Mode
+        out[mesh.name] = data
+    return out
+
+
+def refused(call, match):
+    """``call()`` raises SkinDetachError matching ``match`` and no mesh changed."""
+    before = meshes()
+    with pytest.raises(SkinDetachError, match=match):
+        call()
+    after = meshes()
+    assert before.keys() == after.keys()
+    for name in before:
+        assert np.array_equal(before[name], after[name]), name
+
+
+@pytest.fixture
+def rigged(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    return obj, handle
+
+
+def reload_binding():
+    """Forget the runtime cache, as after loading a file."""
+    binding._CACHE.clear()
+
+
+def test_a_handle_moved_absurdly_far_writes_nothing(rigged):
+    obj, handle = rigged
+    handle.location.x = 1e39
+    refused(lambda: api.deform(obj), "handle .*expected a transform that keeps its vertices finite")
+    handle.location.x = 0.2
+    assert api.deform(obj)["converged"]
+    assert np.isfinite(meshes()[obj.data.name]).all()
+
+
+@pytest.mark.parametrize("field, value", [("skin_weight", np.nan), ("skin_height", np.inf), ("skin_bary", 1e300)])
+def test_crafted_skin_coefficients_are_refused(rigged, field, value):
+    obj, handle = rigged
+    stored = np.array(obj[binding.KEY][field])
+    stored[0] = value
+    del obj[binding.KEY][field]
+    obj[binding.KEY][field] = stored
+    reload_binding()
+    handle.location.x += 0.1
+    refused(lambda: api.deform(obj), f"binding of 'spot'.*{field}")
+    refused(lambda: api.reset(obj), f"binding of 'spot'.*{field}")
+
+
+def test_crafted_rest_and_data_of_the_wrong_kind_are_refused(rigged):
+    obj, _ = rigged
+    rest = np.array(obj[binding.KEY]["rest"])
+    rest[5] = np.nan
+    del obj[binding.KEY]["rest"]
+    obj[binding.KEY]["rest"] = rest
+    reload_binding()
+    refused(lambda: api.reset(obj), "finite stored rest")
+    del obj[binding.KEY]["rest"]
+    obj[binding.KEY]["rest"] = rest[:30]
+    reload_binding()
+    refused(lambda: api.reset(obj), "stored rest positions")
+    obj[binding.KEY]["stats"] = "{not json"
+    obj[binding.KEY]["skin_face"] = np.array([1, 2], dtype=np.int32)
+    reload_binding()
+    refused(lambda: api.deform(obj), "binding of 'spot'")
+    assert api.figures(obj)["build"] == {}  # the panel's figures still read
+
+
+def test_a_proxy_in_edit_mode_stops_the_step_before_any_write(rigged):
+    obj, handle = rigged
+    proxy = api.proxy_of(obj)
+    activate(proxy)
+    bpy.ops.object.mode_set(mode='EDIT')
+    try:
+        handle.location.x += 0.2
+        refused(lambda: api.deform(obj), "proxy .*Edit Mode")
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    assert api.deform(obj)["converged"]  # nothing stale: the next deform works
+
+
+def test_a_linked_duplicate_in_edit_mode_stops_the_step(rigged):
+    obj, handle = rigged
+    twin = bpy.data.objects.new("twin", obj.data)
+    bpy.context.scene.collection.objects.link(twin)
+    activate(twin)
+    bpy.ops.object.mode_set(mode='EDIT')
+    try:
+        handle.location.x += 0.2
+        refused(lambda: api.deform(obj), "Edit Mode")
+    finally:
+        bpy.ops.object.mode_set(mode='OBJECT')
+
+
+def test_a_proxy_pointer_to_another_mesh_is_refused(rigged):
+    obj, handle = rigged
+    other = bpy.data.objects.new("other", api.proxy_of(obj).data.copy())
+    bpy.context.scene.collection.objects.link(other)
+    obj[binding.KEY]["proxy"] = other
+    handle.location.x += 0.2
+    refused(lambda: api.deform(obj), "expected its own proxy")
+    refused(lambda: api.reset(obj), "expected its own proxy")
+
+
+def test_apply_scale_after_binding_is_refused_by_reset(rigged):
+    obj, handle = rigged
+    activate(obj)
+    obj.scale = (2.0, 2.0, 2.0)
+    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
+    refused(lambda: api.reset(obj), "Apply Scale/Rotation")
+    refused(lambda: api.deform(obj), "edited since")
+    api.build(obj)  # rebinding takes the applied shape
+    assert api.deform(obj)["converged"]
+
+
+def test_a_copy_of_a_bound_object_is_refused_until_rebuilt(rigged):
+    obj, handle = rigged
+    activate(obj)
+    bpy.ops.object.duplicate()
+    copy = bpy.context.active_object
+    assert copy is not obj and binding.KEY in copy
+    refused(lambda: api.deform(copy), "belongs to 'spot'")
+    refused(lambda: api.add_handle(copy, [0, 1, 2]), "belongs to 'spot'")
+    api.build(copy)
+    assert api.proxy_of(copy) is not api.proxy_of(obj)
+    assert api.deform(obj)["converged"]
+
+
+def test_object_scale_zero_is_refused(rigged):
+    obj, handle = rigged
+    obj.scale = (0.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    refused(lambda: api.deform(obj), "invertible transform")
+
+
+def test_crafted_handle_ids_and_kinds_are_refused(rigged):
+    obj, handle = rigged
+    tag = handle[handles.TAG]
+    ids = np.array(tag["proxy_ids"])
+    del tag["proxy_ids"]
+    tag["proxy_ids"] = np.r_[ids, -1].astype(np.int32)
+    refused(lambda: api.deform(obj), "proxy_ids in")
+    del tag["proxy_ids"]
+    tag["proxy_ids"] = ids.astype(np.float64) + 0.5
+    refused(lambda: api.deform(obj), "integer proxy_ids")
+    del tag["proxy_ids"]
+    tag["proxy_ids"] = ids
+    tag["kind"] = "MAGNET"
+    refused(lambda: api.deform(obj), "expected kind")
+
+
+def test_the_newest_handle_wins_on_shared_vertices(scene):
+    obj = import_spot()
+    api.build(obj, target_faces=300)
+    top = np.flatnonzero(api.rest_positions(obj)[:, 1] > 0.3)
+    made = [api.add_handle(obj, top) for _ in range(10)]
+    assert [e.name for e in made][-2:] == ["spot_handle_9", "spot_handle_10"]
+    assert api.handles_of(obj)[-1] == made[-1]
+    made[-1].location.x += 0.3   # the newest handle moves, the older ones stay
+    api.add_anchor(obj, np.flatnonzero(api.rest_positions(obj)[:, 1] < -0.3))
+    api.deform(obj)
+    moved = meshes()[obj.data.name].reshape(-1, 3)[top] - api.rest_positions(obj)[top]
+    assert np.allclose(moved[:, 0], 0.3, atol=1e-4)
+
+
+def test_frames_parse_in_linear_time_and_absurd_ranges_are_refused():
+    assert baking.parse_frames("1-30000")[-1] == 30000
+    with pytest.raises(SkinDetachError, match="at most"):
+        baking.parse_frames("1-1000000")
+    with pytest.raises(SkinDetachError, match="at most"):
+        baking.parse_frames(",".join(["1-90000"] * 20))
+    assert baking.file_path("out/#_take_##.obj", 7) == "out/#_take_07.obj"  # the last run only
+
+
+def test_library_linked_objects_are_refused(scene, tmp_path):
+    obj = import_spot()
+    library = tmp_path / "library.blend"
+    bpy.data.libraries.write(str(library), {obj})
+    bpy.ops.wm.read_homefile(use_empty=True)
+    with bpy.data.libraries.load(str(library), link=True) as (source, target):
+        target.objects = ["spot"]
+    linked = target.objects[0]
+    bpy.context.scene.collection.objects.link(linked)
+    refused(lambda: api.build(linked), "linked from")
+
+
+def test_an_unlinked_mesh_held_by_its_rig_is_refused(rigged):
+    obj, handle = rigged
+    for collection in list(obj.users_collection):
+        collection.objects.unlink(obj)
+    handle.location.x += 0.2
+    refused(lambda: api.deform(obj), "unlinked from every scene")
+
+
+def test_bake_script_refuses_to_overwrite_its_source_and_resolves_handles(rigged, tmp_path):
+    obj, handle = rigged
+    source = tmp_path / "rig.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(source))
+    script = [sys.executable, "scripts/bake.py", "--blend", str(source)]
+    run = subprocess.run(script + ["--output", str(source), "--into", "shape-keys"], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 1 and "overwrite the source" in run.stderr
+    run = subprocess.run(script + ["--object", handle.name, "--frames", "1", "--output",
+                                   str(tmp_path / "o_####.obj")], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert f"({len(obj.data.vertices):,} vertices)" in run.stdout and "belongs to 'spot'" in run.stdout
+    run = subprocess.run(script + ["--frames", "1-99999999", "--output", str(tmp_path / "p_####.obj")],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 1 and "at most" in run.stderr and not list(tmp_path.glob("p_*.obj"))
