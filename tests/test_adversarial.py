@@ -231,3 +231,19 @@ def test_bake_script_refuses_to_overwrite_its_source_and_resolves_handles(rigged
     run = subprocess.run(script + ["--frames", "1-99999999", "--output", str(tmp_path / "p_####.obj")],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 1 and "at most" in run.stderr and not list(tmp_path.glob("p_*.obj"))
+
+
+def test_a_binding_that_is_not_a_group_is_refused_and_the_panel_still_draws(rigged):
+    from test_blender_rig import _draw_panel
+    obj, handle = rigged
+    handle[handles.TAG]["kind"] = 7
+    activate(obj)
+    lines = _draw_panel()
+    assert any(kind == "operator" and value == "skin_detach.remove_handle" for kind, value in lines)
+    obj[binding.KEY] = 5
+    reload_binding()
+    refused(lambda: api.deform(obj), "binding group")
+    refused(lambda: api.reset(obj), "binding group")
+    assert any(kind == "label" and value.startswith("Detail:") for kind, value in _draw_panel())
+    with pytest.raises(RuntimeError, match="binding group"):  # headless, an ERROR report raises
+        bpy.ops.skin_detach.apply()
