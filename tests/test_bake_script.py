@@ -77,10 +77,10 @@ def test_bake_script_builds_a_missing_binding_from_the_handles(scene, tmp_path):
     del obj[binding.KEY]  # a file whose binding was lost; its handles remain
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "lost.blend"))
     run = bake("--blend", tmp_path / "lost.blend", "--object", "quads", "--frames", "2", "--target-faces", 200,
-               "--output", tmp_path / "lost.blend")
+               "--output", tmp_path / "found.blend")  # (writing over the source is refused: test_adversarial)
     assert run.returncode == 0, run.stderr
     assert "building the binding" in run.stdout and "binding built first" in run.stdout
-    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "lost.blend"))
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "found.blend"))
     proxies = [o for o in bpy.data.objects if "_skin_detach_proxy_of" in o]
     assert len(proxies) == 1 and binding.has_binding(bpy.data.objects["quads"])
     assert "skin_detach_0002" in bpy.data.objects["quads"].data.shape_keys.key_blocks
