@@ -27,8 +27,12 @@ along K^-1 grad V that restores the volume exactly, halved (backtracking) until 
 not risen. So E never rises from one iterate to the next (``result.energy``); Anderson-mixed
 iterates are kept only when their energy is not above the plain step's start. It has
 converged when the largest squared move of a vertex in one iteration, over the squared
-bounding-box diagonal, is at most ``tol``. E is zero at rest, invariant under rigid motions
-and scales with the square of a uniform scale, so the solution follows both.
+bounding-box diagonal, times ((rate / (1 - rate))^2, at least 1, for the worst recent ratio of
+successive moves) is at most ``tol``: an estimate of the squared distance to the limit. A far
+jump of the constraints is reached in stages (continuation), and an initial guess far from the
+targets is not used (the solve starts from rest), so the same constraints give the same shape
+whatever came before. E is zero at rest, invariant under rigid motions and scales with the
+square of a uniform scale, so the solution follows both.
 
 Method "paper" is the paper's iteration, kept for comparison: minimise ||A X - delta||^2 with
 delta_i = h_i n_i(X), the normals updated from the current neighbours each iteration (a fixed
@@ -66,8 +70,15 @@ ANDERSON_WINDOW = 5
 #: Continuation of the "rotated" solve: constrained vertices moving more than STAGE_JUMP of the
 #: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
 STAGE_JUMP = 0.1
+#: An initial guess whose constrained vertices are farther than this (over the diagonal) from
+#: their targets is not used: the solve starts from rest, as a cold one does.
+WARM_LIMIT = 0.1
 MAX_STAGES = 12
 STAGE_TOL = 1e-6
+#: The convergence test of the "rotated" solve looks at the step ratios of this many iterations
+#: (the first iteration, with no ratio yet, assumes the slowest rate, 0.9: factor 81).
+TAIL_WINDOW = 3
+TAIL_MAX = 81.0
 #: Halvings of the step at most when the volume projection would raise the energy.
 VOLUME_BACKTRACKS = 12
 #: Stop when this many iterations in a row have not reached a new smallest change.
@@ -521,8 +532,15 @@ class DualLaplacian:
         """Where the constrained vertices jump far from ``start`` (their positions in the initial
         guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
         solved loosely from the last (continuation), so a cold start lands on the minimum a drag
-        along the way would reach, not on a fold the first global step happened to fall into."""
+        along the way would reach, not on a fold the first global step happened to fall into.
+        A guess farther than :data:`WARM_LIMIT` is dropped for the rest shape (path independence)."""
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
+        if jump > WARM_LIMIT:
+            # Too far for the initial guess to say which minimum is meant: start from rest, so the
+            # same constraints give the same shape whatever was solved before.
+            points = self.rest.copy()
+            start = self.rest[self.fixed]
+            jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         stages = int(min(MAX_STAGES, np.ceil(jump / STAGE_JUMP)))
         for stage in range(1, stages):
             partial = start + (stage / stages) * (fixed_points - start)
@@ -596,11 +614,24 @@ class DualLaplacian:
             current, targets, energy = accepted
             history.append(change)
             energies.append(energy)
-            if change <= tol:
+            if change * _tail_factor(history) <= tol:
                 converged = True
                 break
         points[free] = current
         return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history, energies)
+
+
+def _tail_factor(history):
+    """How much farther than its last step a linearly converging iteration may still be from its
+    limit, squared: (rate / (1 - rate))^2 for the worst step ratio of the last few iterations
+    (rate at most 0.9), at least 1, so a converged solve is within ``tol`` of the minimum, not
+    just of its last iterate."""
+    if len(history) < 2:
+        return TAIL_MAX
+    recent = np.sqrt(np.asarray(history[-TAIL_WINDOW - 1:]))
+    ratios = recent[1:] / np.maximum(recent[:-1], 1e-300)
+    rate = min(float(ratios.max()), 0.9)
+    return max(1.0, (rate / (1.0 - rate)) ** 2)
 
 
 def _largest_step(step, diagonal):
