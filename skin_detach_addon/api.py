@@ -24,6 +24,7 @@ from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
 from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession
 from .core.errors import SkinDetachError
+from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
@@ -63,31 +64,62 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     return skin_rig.build(obj, target_faces, normal_test, progress)
 
 
-def add_handle(obj, vertex_ids, on_proxy=False):
+def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
     """A handle empty carrying ``vertex_ids`` (k,): vertex indices of ``obj``'s mesh (or of the
-    proxy with ``on_proxy=True``). Move, rotate or animate the empty, then :func:`deform`."""
-    return _add(obj, vertex_ids, handles.HANDLE, on_proxy)
+    proxy with ``on_proxy=True``), or the members of vertex group ``group`` (weight above zero).
+    Move, rotate or animate the empty, then :func:`deform`.
+
+    ``mirror`` ("X", "Y" or "Z", the mesh's local axis, as Blender's Mesh Symmetry): also make
+    the mirrored twin from the vertices at the mirror images (refused, naming how many have
+    none, when the mesh is not symmetric enough); moving either one moves both, mirrored. A
+    selection that is its own mirror image makes one handle that keeps the rig symmetric. When
+    every handle and anchor of a rig is mirrored across the same axis, the result is made
+    exactly symmetric. Returns the handle made from ``vertex_ids``; its twin is in
+    :func:`handles_of`."""
+    return _add(obj, vertex_ids, handles.HANDLE, on_proxy, group, mirror)
 
 
-def add_anchor(obj, vertex_ids, on_proxy=False):
-    """An anchor empty holding ``vertex_ids`` (k,) in place (indices as in :func:`add_handle`)."""
-    return _add(obj, vertex_ids, handles.ANCHOR, on_proxy)
+def add_anchor(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
+    """An anchor empty holding ``vertex_ids`` (k,) (or vertex group ``group``) in place; indices,
+    groups and ``mirror`` as in :func:`add_handle`."""
+    return _add(obj, vertex_ids, handles.ANCHOR, on_proxy, group, mirror)
 
 
-def _add(obj, vertex_ids, kind, on_proxy):
+def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     import bpy
     obj = _bound(obj)
     binding = stored.open_binding(obj)
     surface = binding.surface
+    if mirror not in (None, "", *handles.AXES):
+        raise SkinDetachError(f"mirror: expected None, 'X', 'Y' or 'Z', got {mirror!r}")
+    if (vertex_ids is None) == (group is None):
+        raise SkinDetachError("vertex_ids, group: expected exactly one of them, got "
+                              f"{'both' if group is not None else 'neither'}")
+    if group is not None:
+        if on_proxy:
+            raise SkinDetachError("group: expected a vertex group of the mesh, not of the proxy (on_proxy=False)")
+        vertex_ids = mesh_io.group_members(obj, group)
     if on_proxy:
+        if mirror:
+            raise SkinDetachError("mirror: expected mesh vertices (the proxy is not symmetric); select on the mesh")
         proxy_ids = as_vertex_ids("vertex_ids", vertex_ids, surface.proxy_vertices.shape[0])
         detail = None
     else:
-        detail = as_vertex_ids("vertex_ids", vertex_ids, surface.n_detail)
+        detail = np.unique(as_vertex_ids("vertex_ids", vertex_ids, surface.n_detail))
         proxy_ids = surface.proxy_vertices_for(detail)
+    twin_detail = None
+    if mirror:
+        twin_detail = np.unique(mirrored_ids(binding.mirror_map(mirror), detail, mirror))
+        if np.array_equal(twin_detail, detail):
+            twin_detail = None  # its own mirror image: one symmetric handle
     current = mesh_io.read_positions(binding.proxy.data).astype(np.float64)
-    empty = handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current,
-                        detail_ids=detail, size=skin_rig.handle_size(obj))
+    size = skin_rig.handle_size(obj)
+    empty = handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current, detail_ids=detail,
+                        size=size, group=group or "", mirror=mirror or "")
+    if twin_detail is not None:
+        twin = handles.add(obj, binding.proxy, kind, surface.proxy_vertices_for(twin_detail), surface.proxy_vertices,
+                           current, detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
+        handles.pair(empty, twin)
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
     return empty
 

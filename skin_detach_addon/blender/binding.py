@@ -16,6 +16,7 @@ import numpy as np
 from ..core.dual_laplacian import DualLaplacian
 from ..core.errors import SkinDetachError
 from ..core.surface import SkinDetachedSurface
+from ..core.symmetry import mirror_map
 from . import mesh_io
 
 KEY = "_skin_detach"
@@ -44,6 +45,7 @@ class Binding:
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
         #: Figures of the last step in this session (dict, see StepReport.figures), or None.
         self.last_step = None
+        self._mirrors = {}
 
     def solve_proxy(self, ids, targets, preserve_volume, tol):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
@@ -59,6 +61,13 @@ class Binding:
         result = entry[0].solve(targets, initial=entry[1], max_iter=MAX_ITERATIONS, tol=tol)
         entry[1] = result.vertices
         return result
+
+    def mirror_map(self, axis):
+        """(n,) mirror twin of every mesh vertex across local ``axis`` ("X", "Y", "Z") at rest,
+        -1 where there is none (cached)."""
+        if axis not in self._mirrors:
+            self._mirrors[axis] = mirror_map(self.rest, "XYZ".index(axis))
+        return self._mirrors[axis]
 
     def forget_warm_starts(self):
         for entry in self._solvers.values():

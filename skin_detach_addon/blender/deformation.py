@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
+from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handles, mesh_io
 
@@ -79,12 +80,18 @@ class Deformation:
         """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        ids, targets, groups = handles.constraints(self.obj, self.handles(), self.binding.surface.proxy_vertices)
+        empties = self.handles()
+        handles.sync_twins(self.obj, empties)
+        ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
-        return result, self.binding.rebuild(result.vertices, groups)
+        detail = self.binding.rebuild(result.vertices, groups)
+        axis = handles.symmetry_axis(empties)
+        if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
+            detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
+        return result, detail
 
     def step(self, tol=SETTLE_TOL):
         """:meth:`solve`, then write the mesh and the proxy and record the written digest and

@@ -96,10 +96,12 @@ def _all_objects():
     return bpy.data.objects
 
 
-def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None, size=1.0):
+def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None, size=1.0, group="", mirror=""):
     """New empty for ``proxy_ids`` (c,), placed at their centroid in ``current_proxy`` (m, 3) local
     positions; its rest frame is their centroid in ``rest_proxy`` (m, 3), so an empty made on a
-    deformed mesh starts out where the mesh is."""
+    deformed mesh starts out where the mesh is. ``group``: the vertex group it was made from
+    (for the panel); ``mirror``: the local axis ("X", "Y", "Z") it is symmetric about or mirrored
+    across (see :func:`pair`)."""
     import bpy
     if kind not in (HANDLE, ANCHOR):
         raise SkinDetachError(f"kind: expected {HANDLE!r} or {ANCHOR!r}, got {kind!r}")
@@ -127,8 +129,86 @@ def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None,
         "proxy_ids": ids.astype(np.int32),
         "detail_ids": np.asarray(detail_ids if detail_ids is not None else [], dtype=np.int32),
         "rest_local": rest_local.ravel(),
+        "group": str(group),
+        "mirror": str(mirror),
     }
     return empty
+
+
+AXES = ("X", "Y", "Z")
+
+
+def mirror_matrix(axis):
+    """(4, 4) reflection across the plane through the origin normal to local ``axis``."""
+    out = np.eye(4)
+    out[AXES.index(axis), AXES.index(axis)] = -1.0
+    return out
+
+
+def pair(first, second):
+    """Make two empties mirror twins: moving either moves the other, mirrored across their axis."""
+    first[TAG]["twin"] = second
+    second[TAG]["twin"] = first
+    for empty in (first, second):
+        _mark_synced(empty)
+
+
+def twin_of(empty):
+    """The mirror twin of a handle or anchor, or None."""
+    twin = _get(empty, "twin")
+    return twin if is_handle(twin) else None
+
+
+def mirror_of(empty):
+    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or ""."""
+    axis = _get(empty, "mirror", "")
+    return axis if axis in AXES else ""
+
+
+def group_of(empty):
+    """The vertex group a handle was made from, or ""."""
+    return str(_get(empty, "group", ""))
+
+
+def _basis(empty):
+    return np.array(empty.matrix_basis, dtype=np.float64).ravel()
+
+
+def _mark_synced(empty):
+    empty[TAG]["synced"] = _basis(empty)
+
+
+def _moved(empty):
+    synced = np.asarray(_get(empty, "synced", []), dtype=np.float64)
+    return synced.shape != (16,) or not np.array_equal(synced, _basis(empty))
+
+
+def sync_twins(obj, empties):
+    """Move every twin whose partner moved since the last sync to the mirror image of the
+    partner's motion (in ``obj``'s local space); when both moved, the older one leads."""
+    from mathutils import Matrix
+    done = set()
+    for empty in empties:
+        twin = twin_of(empty)
+        if twin is None or empty.name in done or mirror_of(empty) == "":
+            continue
+        done.update((empty.name, twin.name))
+        if not (_moved(empty) or _moved(twin)):
+            continue
+        lead, follow = (empty, twin) if _moved(empty) or not _moved(twin) else (twin, empty)
+        reflect = mirror_matrix(mirror_of(empty))
+        motion = reflect @ local_motion(obj, lead) @ reflect
+        world = np.array(obj.matrix_world, dtype=np.float64) @ motion @ rest_local_of(follow)
+        follow.matrix_world = Matrix(world.tolist())
+        _mark_synced(lead)
+        _mark_synced(follow)
+
+
+def symmetry_axis(empties):
+    """The axis every handle and anchor of a rig is mirrored across or symmetric about (so a
+    symmetric mesh must stay symmetric), or "" when the rig is not symmetric."""
+    axes = {mirror_of(empty) for empty in empties}
+    return axes.pop() if len(axes) == 1 and "" not in axes and empties else ""
 
 
 def _free_name(base):

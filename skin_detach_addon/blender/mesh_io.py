@@ -30,6 +30,19 @@ def read_triangles(mesh):
     return out.reshape(-1, 3).astype(np.int64)
 
 
+def group_members(obj, name):
+    """(k,) int64 vertex indices of ``obj``'s vertex group ``name`` with a weight above zero."""
+    group = obj.vertex_groups.get(name) if isinstance(name, str) else None
+    if group is None:
+        raise SkinDetachError(f"group: expected a vertex group of {obj.name!r} "
+                              f"({', '.join(g.name for g in obj.vertex_groups) or 'it has none'}), got {name!r}")
+    index = group.index
+    members = [v.index for v in obj.data.vertices for g in v.groups if g.group == index and g.weight > 0.0]
+    if not members:
+        raise SkinDetachError(f"group: expected vertices with a weight above zero in {name!r}, it has none")
+    return np.asarray(members, dtype=np.int64)
+
+
 def mesh_fingerprint(mesh):
     """Digest of the vertex, face and corner counts and every corner's vertex: changes when the
     topology or the vertex order changes, not when positions do. (Face boundaries are read

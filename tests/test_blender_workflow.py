@@ -1,0 +1,123 @@
+"""Artist workflow (headless bpy): symmetry, handles from vertex groups, scale in the drag, the
+panel's figures."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import activate  # noqa: E402
+
+from skin_detach_addon import api  # noqa: E402
+from skin_detach_addon.api import SkinDetachError  # noqa: E402
+
+
+def monkey():
+    """Suzanne (symmetric across local X, loose eyes), triangulated, as the active object."""
+    bpy.ops.mesh.primitive_monkey_add()
+    obj = bpy.context.active_object
+    modifier = obj.modifiers.new("tri", 'TRIANGULATE')
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
+    activate(obj)
+    return obj
+
+
+def positions(obj):
+    out = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+    obj.data.vertices.foreach_get("co", out)
+    return out.reshape(-1, 3).astype(np.float64)
+
+
+def test_a_mirrored_rig_moves_twins_mirrored_and_keeps_a_symmetric_mesh_symmetric(scene):
+    obj = monkey()
+    obj.rotation_euler = (0.3, 0.0, 0.7)  # world transforms do not matter: symmetry is local
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    ear = np.flatnonzero(rest[:, 0] < -1.0)                  # the left ear
+    chin = np.flatnonzero(rest[:, 2] < -0.6)                  # symmetric itself
+    grip = api.add_handle(obj, ear, mirror="X")
+    api.add_anchor(obj, chin, mirror="X")
+    made = api.handles_of(obj)
+    assert len(made) == 3 and sum(api.handle_kind(e) == api.HANDLE for e in made) == 2
+    grip.location.z += 0.3
+    grip.location.x -= 0.2
+    grip.rotation_euler.y = 0.4
+    api.deform(obj)
+    twin = [e for e in made if api.handle_kind(e) == api.HANDLE and e != grip][0]
+    assert twin.matrix_basis != twin.matrix_basis.Identity(4)  # the twin followed
+    now = positions(obj)
+    mapping = np.full(len(rest), -1)
+    from skin_detach_addon.core.symmetry import mirror_map
+    mapping = mirror_map(rest, 0)
+    matched = mapping >= 0
+    image = now[mapping[matched]] * [-1.0, 1.0, 1.0]
+    size = float(np.ptp(rest, axis=0).max())
+    assert matched.mean() > 0.95
+    assert np.abs(now[matched] - image).max() <= 1e-6 * size
+    assert np.abs(now - rest).max() > 0.1  # it did move
+    # Moving the twin instead drives the first one, mirrored.
+    twin.location.z -= 0.5
+    api.deform(obj)
+    assert grip.location.z < 0.0
+    now = positions(obj)
+    assert np.abs(now[matched] - now[mapping[matched]] * [-1.0, 1.0, 1.0]).max() <= 1e-6 * size
+
+
+def test_mirror_on_a_mesh_that_is_not_symmetric_is_refused(scene):
+    from blender_support import import_spot
+    obj = import_spot()  # spot is symmetric across X: nudge a few vertices off
+    nudged = positions(obj)
+    nudged[:40, 0] += 0.02
+    obj.data.vertices.foreach_set("co", nudged.astype(np.float32).ravel())
+    obj.data.update()
+    api.build(obj, target_faces=300)
+    with pytest.raises(SkinDetachError, match="symmetric across X.* 40 of 40"):
+        api.add_handle(obj, np.arange(40), mirror="X")
+    with pytest.raises(SkinDetachError, match="mirror"):
+        api.add_handle(obj, np.arange(40), mirror="W")
+    assert api.handles_of(obj) == []
+
+
+def test_handles_and_anchors_from_vertex_groups(scene):
+    obj = monkey()
+    rest = positions(obj)
+    jaw = obj.vertex_groups.new(name="jaw")
+    jaw_ids = np.flatnonzero(rest[:, 2] < -0.5)
+    jaw.add(jaw_ids.tolist(), 0.8, 'REPLACE')
+    jaw.add([0], 0.0, 'REPLACE')  # weight zero: not a member
+    api.build(obj, target_faces=300)
+    handle = api.add_handle(obj, group="jaw")
+    assert api.handle_vertex_count(handle) > 0
+    from skin_detach_addon.blender import handles
+    assert handles.group_of(handle) == "jaw"
+    assert set(handles.detail_ids_of(handle)) == set(jaw_ids) - {0}
+    with pytest.raises(SkinDetachError, match="vertex group"):
+        api.add_anchor(obj, group="base")
+    with pytest.raises(SkinDetachError, match="exactly one"):
+        api.add_anchor(obj, [1, 2], group="jaw")
+
+
+def test_drag_scales_about_the_handle_centre_freely_or_along_an_axis(scene):
+    from blender_support import TopView, import_spot, rig
+    from skin_detach_addon.blender.drag_session import DragSession
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    rest = positions(obj)
+    view = TopView(0.01)
+    centre = np.array(view.to_screen(handle.matrix_world.to_translation()))
+    start = np.array(handle.matrix_world)
+    session = DragSession(obj, handle, view, tuple(centre + (10, 0)))
+    session.event("S", "PRESS", tuple(centre + (10, 0)))
+    session.event("MOUSEMOVE", "NOTHING", tuple(centre + (0, 15)))  # 1.5 times as far from the centre
+    scaled = np.array(handle.matrix_world)
+    assert np.allclose(scaled[:3, :3], 1.5 * start[:3, :3], atol=1e-6)
+    assert np.allclose(scaled[:3, 3], start[:3, 3], atol=1e-6)   # about the handle's own centre
+    assert session.header.startswith("Skin Detach scale") and "S scale" in session.header
+    session.event("Z", "PRESS", tuple(centre + (0, 15)))           # keep 1.5, now along world Z only
+    session.event("MOUSEMOVE", "NOTHING", tuple(centre + (0, 30)))  # twice again along Z
+    both = np.array(handle.matrix_world)
+    assert np.allclose(both[:3, :3], np.diag([1.5, 1.5, 3.0]) @ start[:3, :3], atol=1e-6)
+    session.event("RET", "PRESS", tuple(centre + (0, 30)))
+    assert np.abs(positions(obj) - rest).max() > 0.01
+    assert np.isfinite(positions(obj)).all()
