@@ -29,7 +29,7 @@ from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
-           "remove_handle", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
+           "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "RUNNING", "FINISHED", "CANCELLED"]
 
@@ -200,6 +200,36 @@ def _check_handle(empty):
     if not handles.is_handle(empty):
         raise SkinDetachError(f"empty: expected a Skin Detach handle or anchor, got "
                               f"{'nothing' if empty is None else repr(empty.name)}")
+
+
+def handle_conflicts(obj):
+    """Handles and anchors of ``obj`` that share proxy vertices: a list of dicts (loser, winner:
+    the empties' names; shared: how many proxy vertices). A handle beats an anchor; between two
+    of a kind the newer wins."""
+    empties = handles_of(obj)
+    proxy = stored.proxy_of(_bound(obj))  # cheap enough for every redraw of the panel
+    m = len(proxy.data.vertices) if proxy is not None else None
+    sets = []
+    for empty in empties:
+        try:
+            sets.append((empty, set(handles.proxy_ids_of(empty, m).tolist()), handles.kind_of(empty)))
+        except SkinDetachError:
+            continue  # damaged: the panel marks it, the solve refuses it
+    out = []
+    for i, (older, older_ids, older_kind) in enumerate(sets):
+        for newer, newer_ids, newer_kind in sets[i + 1:]:
+            shared = len(older_ids & newer_ids)
+            if shared:
+                winner, loser = (older, newer) if older_kind == handles.HANDLE and newer_kind == handles.ANCHOR \
+                    else (newer, older)
+                out.append({"loser": loser.name, "winner": winner.name, "shared": shared})
+    return out
+
+
+def handle_group(empty):
+    """The vertex group a handle or anchor was made from, or ""."""
+    _check_handle(empty)
+    return handles.group_of(empty)
 
 
 def proxy_of(obj):

@@ -244,7 +244,11 @@ class _Layout:
         assert hasattr(data, name), name
         self.lines.append(("prop", name))
 
-    def operator(self, idname, text="", icon='NONE', depress=False):
+    def prop_search(self, data, name, search_data, search_name, **options):
+        assert hasattr(data, name) and hasattr(search_data, search_name), (name, search_name)
+        self.lines.append(("prop", name))
+
+    def operator(self, idname, text="", icon='NONE', depress=False, **options):
         group, name = idname.split(".")
         assert hasattr(getattr(bpy.ops, group), name), idname
         self.lines.append(("operator", idname))

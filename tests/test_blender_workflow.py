@@ -121,3 +121,33 @@ def test_drag_scales_about_the_handle_centre_freely_or_along_an_axis(scene):
     session.event("RET", "PRESS", tuple(centre + (0, 30)))
     assert np.abs(positions(obj) - rest).max() > 0.01
     assert np.isfinite(positions(obj)).all()
+
+
+def test_the_panel_tells_conflicts_groups_the_target_and_the_add_operators_mirror(scene):
+    from test_blender_rig import _draw_panel
+    obj = monkey()
+    group = obj.vertex_groups.new(name="brow")
+    rest = positions(obj)
+    group.add(np.flatnonzero(rest[:, 2] > 0.5).tolist(), 1.0, 'REPLACE')
+    scene.skin_detach.target_faces = 120  # the normal test stops above such a small target
+    activate(obj)
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    older = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.3))
+    newer = api.add_handle(obj, group="brow")
+    conflicts = api.handle_conflicts(obj)
+    assert conflicts and conflicts[0]["loser"] == older.name and conflicts[0]["winner"] == newer.name
+    activate(obj)
+    labels = [value for kind, value in _draw_panel() if kind == "label"]
+    assert any(f"with {newer.name}, which wins there" in text for text in labels)
+    assert any("the normal test stopped above it" in text for text in labels) == \
+        (not api.figures(obj)["build"]["target_reached"])
+    # The add operators: a group and the panel's mirror setting.
+    scene.skin_detach.mirror = 'X'
+    activate(obj)
+    count = len(api.handles_of(obj))
+    assert bpy.ops.skin_detach.add_anchor(group="brow") == {'FINISHED'}
+    assert len(api.handles_of(obj)) == count + 1  # brow is its own mirror image: one symmetric anchor
+    activate(obj)
+    obj.data.vertices.foreach_set("select", rest[:, 0] < -1.0)
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
+    assert len(api.handles_of(obj)) == count + 3  # the ear and its twin

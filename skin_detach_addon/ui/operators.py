@@ -95,16 +95,28 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 class _AddOperator(_BoundOperator):
     kind = api.HANDLE
     bl_options = {'REGISTER', 'UNDO'}
+    group: bpy.props.StringProperty(name="Vertex Group", default="",
+                                    description="Make it from this vertex group instead of the selection")
+    mirror: bpy.props.EnumProperty(name="Mirror", default='NONE',
+                                   items=(('NONE', "Off", ""), ('X', "X", ""), ('Y', "Y", ""), ('Z', "Z", "")),
+                                   description="Also make the mirrored twin (default: the panel's setting)")
 
     def run(self, context):
-        obj, ids, on_proxy = api.selected_vertices(context)
+        if not self.properties.is_property_set("mirror"):
+            self.mirror = context.scene.skin_detach.mirror
+        mirror = None if self.mirror == 'NONE' else self.mirror
         add = api.add_handle if self.kind == api.HANDLE else api.add_anchor
-        empty = add(obj, ids, on_proxy=on_proxy)
+        if self.group:
+            empty = add(bound_owner(context), group=self.group, mirror=mirror)
+        else:
+            obj, ids, on_proxy = api.selected_vertices(context)
+            empty = add(obj, ids, on_proxy=on_proxy, mirror=mirror)
         for obj in context.selected_objects:
             obj.select_set(False)
         empty.select_set(True)
         context.view_layer.objects.active = empty  # ready to drag
-        self.report({'INFO'}, f"Skin Detach: {empty.name} holds {api.handle_vertex_count(empty)} proxy vertices")
+        twin = " and its mirrored twin" if mirror else ""
+        self.report({'INFO'}, f"Skin Detach: {empty.name}{twin} holds {api.handle_vertex_count(empty)} proxy vertices")
         return {'FINISHED'}
 
 

@@ -35,16 +35,31 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.add_handle", icon='ADD')
         row.operator("skin_detach.add_anchor", icon='PINNED')
+        box.prop(settings, "mirror", expand=True)
+        row = box.row(align=True)
+        row.prop_search(settings, "handle_group", obj, "vertex_groups", text="")
+        if settings.handle_group:
+            row.operator("skin_detach.add_handle", text="", icon='ADD').group = settings.handle_group
+            row.operator("skin_detach.add_anchor", text="", icon='PINNED').group = settings.handle_group
+        try:
+            conflicts = {c["loser"]: c for c in api.handle_conflicts(obj)}
+        except api.SkinDetachError:
+            conflicts = {}
         for empty in api.handles_of(obj):
             row = box.row(align=True)
             try:
                 icon = 'EMPTY_AXIS' if api.handle_kind(empty) == api.HANDLE else 'PINNED'
             except api.SkinDetachError:
                 icon = 'ERROR'  # a damaged handle: listed so that it can be removed
-            select = row.operator("skin_detach.select_handle", text=empty.name, icon=icon,
-                                  depress=empty == context.active_object)
+            group = api.handle_group(empty)
+            select = row.operator("skin_detach.select_handle", text=f"{empty.name} ({group})" if group else empty.name,
+                                  icon=icon, depress=empty == context.active_object)
             select.name = empty.name
             row.operator("skin_detach.remove_handle", text="", icon='X').name = empty.name
+            if empty.name in conflicts:
+                conflict = conflicts[empty.name]
+                box.label(text=f"  shares {conflict['shared']} proxy vertices with {conflict['winner']}, "
+                               f"which wins there", icon='INFO')
 
         box = layout.box()
         box.label(text="Deform", icon='MOD_SIMPLEDEFORM')
@@ -65,6 +80,8 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text="Figures", icon='INFO')
         box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
+        if stats.get("target_reached") is False:
+            box.label(text=f"  target {stats.get('target_faces', 0):,}: the normal test stopped above it", icon='INFO')
         box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")
         last = figures["last_step"]
         if last is None:

@@ -19,6 +19,16 @@ class SkinDetachSettings(bpy.types.PropertyGroup):
     preserve_volume: bpy.props.BoolProperty(
         name="Preserve Volume", default=True,
         description="Keep the enclosed volume of closed proxies while deforming")
+    mirror: bpy.props.EnumProperty(
+        name="Mirror", default='NONE',
+        items=(('NONE', "Off", "Handles and anchors are made from the selection only"),
+               ('X', "X", "Also make the mirrored twin across local X"),
+               ('Y', "Y", "Also make the mirrored twin across local Y"),
+               ('Z', "Z", "Also make the mirrored twin across local Z")),
+        description="Add Handle/Anchor also makes the mirrored twin (the mesh must be symmetric); moving either "
+                    "moves both")
+    handle_group: bpy.props.StringProperty(
+        name="Group", default="", description="Vertex group to make a handle or anchor from (weights above zero)")
     live_update: bpy.props.BoolProperty(
         name="Live Update", default=False, update=_toggle_live,
         description="Deform the mesh whenever a handle moves (G/R/S, drivers, animation, frame change)")
