@@ -22,9 +22,10 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
 
 from bench.meshes import ROOT, SIZES, armadillo, blender_mesh
+from bench.render import colour_object, render_row
 
 import bpy
-from mathutils import Matrix, Vector
+from mathutils import Matrix
 
 from skin_detach_addon import api
 from bench.scenario import bend_scenario
@@ -44,91 +45,24 @@ def drag(obj, handle, scenario, steps):
 
 
 def render(obj, rest, proxy, path, labels, pixels=1800):
-    """Original (rest), proxy and result side by side, seen from the front along the bend's
-    rotation axis; Workbench, or Cycles on the CPU where there is no OpenGL."""
+    """Original (rest), proxy and result side by side (bench.render.render_row)."""
     scene = bpy.context.scene
-    deformed = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
-    obj.data.vertices.foreach_get("co", deformed)
-    deformed = deformed.reshape(-1, 3).astype(np.float64)
-    extent = rest.max(axis=0) - rest.min(axis=0)
-    longest, middle, shortest = np.argsort(extent)[::-1]
-    look = Vector([-1.0 if i == shortest else 0.0 for i in range(3)])  # towards the armadillo's face
-    facing = look.to_track_quat('-Z', 'Y')  # camera and labels: local Y up
-    both = np.vstack([rest, deformed])
-    step = np.zeros(3)
-    step[middle] = 1.15 * np.ptp(both[:, middle]) * np.sign((facing @ Vector((1, 0, 0)))[middle])
-    panels = [(k - 2) * step for k in range(3)]  # original, proxy, result from left to right
-
-    original = obj.copy()
-    original.data = obj.data.copy()
+    extent = float(np.ptp(rest, axis=0).max())
+    original = bpy.data.objects.new("original", obj.data.copy())
     original.data.vertices.foreach_set("co", rest.astype(np.float32).ravel())
     original.data.update()
     cage = bpy.data.objects.new("proxy_view", proxy.data.copy())
     wire = bpy.data.objects.new("proxy_wire", cage.data)
-    for item in (original, cage, wire):
+    result = bpy.data.objects.new("result", obj.data.copy())
+    for item in (original, cage, wire, result):
         scene.collection.objects.link(item)
-        for key in list(item.keys()):
-            del item[key]
-    wire.modifiers.new("wire", 'WIREFRAME').thickness = 0.004 * extent[longest]
-    original.location = Vector(panels[0])
-    cage.location = wire.location = Vector(panels[1])
-    colours = {original: (0.72, 0.72, 0.72, 1), cage: (0.95, 0.62, 0.3, 1), wire: (0.15, 0.1, 0.05, 1),
-               obj: (0.45, 0.65, 0.9, 1)}
-    for item, colour in colours.items():
-        item.color = colour
-        item.hide_render = False
-
-    bottom = both[:, longest].min() - 0.08 * extent[longest]
-    top = both[:, longest].max()
-    centre = np.zeros(3)
-    centre[middle] = (both[:, middle].min() + both[:, middle].max()) / 2
-    centre[shortest] = rest[:, shortest].mean()
-    for k, text in enumerate(labels):
-        curve = bpy.data.curves.new(f"label{k}", 'FONT')
-        curve.body, curve.align_x, curve.size = text, 'CENTER', 0.055 * extent[longest]
-        label = bpy.data.objects.new(f"label{k}", curve)
-        scene.collection.objects.link(label)
-        place = centre + panels[k]
-        place[longest] = bottom
-        label.location = Vector(place)
-        label.rotation_euler = facing.to_euler()
-        label.color = (0.05, 0.05, 0.05, 1)
-        colours[label] = label.color
-
-    camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-    scene.collection.objects.link(camera)
-    camera.data.type = 'ORTHO'
-    aim = centre + panels[1]
-    aim[longest] = (bottom + top) / 2
-    camera.location = Vector(aim) - float(3 * extent[longest]) * look
-    camera.rotation_euler = facing.to_euler()
-    width = 3 * abs(step[middle]) + 0.1 * extent[longest]
-    height = 1.15 * (top - bottom)
-    scene.render.resolution_x, scene.render.resolution_y = pixels, int(pixels * height / width)
-    camera.data.ortho_scale = max(width, height)
-    camera.data.clip_end = 10 * extent[longest]
-    scene.camera = camera
-    scene.world = bpy.data.worlds.new("white")
-    scene.world.color = (1, 1, 1)
-    scene.view_settings.view_transform = 'Standard'
-    scene.render.filepath = str(path)
-    scene.render.image_settings.file_format = 'PNG'
-    try:
-        scene.render.engine = 'BLENDER_WORKBENCH'
-        shading = scene.display.shading
-        shading.light, shading.color_type, shading.show_cavity = 'STUDIO', 'OBJECT', True
-        bpy.ops.render.render(write_still=True)
-        return "Workbench"
-    except RuntimeError:  # no OpenGL/EGL on this machine: the CPU path tracer
-        scene.render.engine = 'CYCLES'
-        scene.cycles.device, scene.cycles.samples = 'CPU', 16
-        for item, colour in colours.items():
-            material = bpy.data.materials.new(item.name)
-            material.diffuse_color = colour
-            item.data.materials.clear()
-            item.data.materials.append(material)
-        bpy.ops.render.render(write_still=True)
-        return "Cycles"
+        item.matrix_world = obj.matrix_world.copy()
+    wire.modifiers.new("wire", 'WIREFRAME').thickness = 0.004 * extent
+    for item, colour in ((original, (0.72, 0.72, 0.72, 1)), (cage, (0.95, 0.62, 0.3, 1)),
+                         (wire, (0.15, 0.1, 0.05, 1)), (result, (0.45, 0.65, 0.9, 1))):
+        colour_object(item, colour)
+    obj.hide_render = True
+    return render_row([[original], [cage, wire], [result]], labels, path, pixels)
 
 
 def main():

@@ -28,3 +28,28 @@ def test_demo_writes_blend_obj_picture_and_figures(tmp_path):
     png = (tmp_path / "demo.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">I", png[16:20])[0] == 480
     assert "ms per step in Blender" in run.stdout
+
+
+def picture_is_not_blank(path):
+    """A PNG that is not all background: load it with Blender and look at its pixels."""
+    import bpy
+    import numpy as np
+    image = bpy.data.images.load(str(path))
+    try:
+        pixels = np.empty(image.size[0] * image.size[1] * 4, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    finally:
+        bpy.data.images.remove(image)
+    rgb = pixels.reshape(-1, 4)[:, :3]
+    return float((rgb.min(axis=1) < 0.9).mean()) > 0.05  # at least 5 % of the picture is not white
+
+
+def test_tutorial_renders_its_two_pictures(tmp_path):
+    script = DEMO.parent / "tutorial.py"
+    run = subprocess.run([sys.executable, str(script), "--out", str(tmp_path), "--width", "320"], capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    for name in ("tutorial_setup.png", "compare_stack.png"):
+        png = (tmp_path / name).read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">I", png[16:20])[0] == 320
+        assert picture_is_not_blank(tmp_path / name), name
