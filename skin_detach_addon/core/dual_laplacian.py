@@ -47,8 +47,8 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from .errors import SkinDetachError
-from .geometry import (barycentric, bbox_diagonal, component_labels, cross_rows, signed_volumes, unique_edges,
-                       unit_rows)
+from .geometry import (barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, signed_volumes,
+                       unique_edges, unit_rows)
 from .rotations import WarmRotations
 from .validation import as_points, as_triangles, as_vertex_ids
 
@@ -345,7 +345,7 @@ class DualLaplacian:
         self._spoke_tail = np.concatenate([undirected[:, 0], undirected[:, 1]])
         spoke_head = np.concatenate([undirected[:, 1], undirected[:, 0]])
         n_spokes = self._spoke_tail.size
-        spoke_weight = np.sqrt(np.tile(_cotangent_weights(self.rest, self.faces, undirected), 2))
+        spoke_weight = np.sqrt(np.tile(cotangent_weights(self.rest, self.faces, undirected), 2))
         edges = sp.csr_matrix((np.r_[spoke_weight, -spoke_weight],
                                (np.r_[np.arange(n_spokes), np.arange(n_spokes)], np.r_[spoke_head, self._spoke_tail])),
                               shape=(n_spokes, m))
@@ -637,23 +637,6 @@ def _tail_factor(history):
 def _largest_step(step, diagonal):
     """Largest squared vertex move of ``step`` (r, 3) over the squared bounding-box diagonal."""
     return float(np.max(np.einsum("ij,ij->i", step, step))) / diagonal ** 2 if step.size else 0.0
-
-
-def _cotangent_weights(points, faces, undirected):
-    """(e,) cotangent weights (cot alpha + cot beta) / 2 of the ``undirected`` edges (e, 2),
-    clamped below at a small positive share of their mean, normalised to mean one."""
-    m = points.shape[0]
-    key = undirected[:, 0] * m + undirected[:, 1]
-    weight = np.zeros(undirected.shape[0])
-    for j in range(3):
-        a, b, c = faces[:, j], faces[:, (j + 1) % 3], faces[:, (j + 2) % 3]
-        u, v = points[a] - points[c], points[b] - points[c]
-        cot = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(cross_rows(u, v), axis=1), 1e-300)
-        edge_key = np.minimum(a, b) * m + np.maximum(a, b)
-        weight += np.bincount(np.searchsorted(key, edge_key), weights=cot / 2, minlength=weight.size)
-    mean = np.abs(weight).mean() if weight.size else 1.0
-    weight = np.maximum(weight, 0.05 * mean)
-    return weight / weight.mean()
 
 
 def deform_proxy(proxy_vertices, proxy_faces, constrained_ids, constrained_positions, preserve_volume=True,

@@ -125,3 +125,21 @@ def signed_volumes(points, triangles, face_label=None, labels=None):
     index = np.searchsorted(labels, face_label)
     valid = (index < labels.size) & (labels[np.minimum(index, labels.size - 1)] == face_label)
     return np.bincount(index[valid], weights=per_face[valid], minlength=labels.size)
+
+
+def cotangent_weights(points, triangles, edges):
+    """(e,) cotangent weights (cot alpha + cot beta) / 2 of ``edges`` (e, 2) (sorted rows, as
+    :func:`unique_edges` gives them), clamped below at a small positive share of their mean and
+    normalised to mean one."""
+    m = points.shape[0]
+    key = edges[:, 0] * m + edges[:, 1]
+    weight = np.zeros(edges.shape[0])
+    for j in range(3):
+        a, b, c = triangles[:, j], triangles[:, (j + 1) % 3], triangles[:, (j + 2) % 3]
+        u, v = points[a] - points[c], points[b] - points[c]
+        cot = np.einsum("ij,ij->i", u, v) / np.maximum(np.linalg.norm(cross_rows(u, v), axis=1), 1e-300)
+        weight += np.bincount(np.searchsorted(key, np.minimum(a, b) * m + np.maximum(a, b)), weights=cot / 2,
+                              minlength=weight.size)
+    mean = np.abs(weight).mean() if weight.size else 1.0
+    weight = np.maximum(weight, 0.05 * max(mean, 1e-300))
+    return weight / weight.mean() if weight.size else weight

@@ -18,7 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import face_cross, unique_edges
+from .geometry import cotangent_weights, face_cross, unique_edges
 from .rotations import WarmRotations
 
 
@@ -46,7 +46,7 @@ class VertexSimilarities:
         self._tail = np.concatenate([edges[:, 0], edges[:, 1]])
         self._head = np.concatenate([edges[:, 1], edges[:, 0]])
         self._spokes = rest[self._head] - rest[self._tail]
-        self._weight = np.tile(_positive_cotangents(rest, triangles, edges), 2)
+        self._weight = np.tile(cotangent_weights(rest, triangles, edges), 2)
         self._m = m
         self._cache = {}
         self._rotations = WarmRotations()
@@ -81,23 +81,6 @@ class VertexSimilarities:
         scales = np.where(lonely, 1.0, trace / np.where(lonely, 1.0, norm))
         rotations[lonely] = np.eye(3)
         return scales, rotations
-
-
-def _positive_cotangents(points, triangles, edges):
-    """(e,) cotangent weights of ``edges`` (e, 2) (sorted rows of :func:`unique_edges`), clamped
-    below at a small positive share of their mean."""
-    m = points.shape[0]
-    key = edges[:, 0] * m + edges[:, 1]
-    weight = np.zeros(edges.shape[0])
-    for j in range(3):
-        a, b, c = triangles[:, j], triangles[:, (j + 1) % 3], triangles[:, (j + 2) % 3]
-        u, v = points[a] - points[c], points[b] - points[c]
-        cross = np.linalg.norm(np.cross(u, v), axis=1)
-        cot = np.einsum("ij,ij->i", u, v) / np.maximum(cross, 1e-300)
-        weight += np.bincount(np.searchsorted(key, np.minimum(a, b) * m + np.maximum(a, b)), weights=cot / 2,
-                              minlength=weight.size)
-    mean = np.abs(weight).mean() if weight.size else 1.0
-    return np.maximum(weight, 0.05 * max(mean, 1e-300))
 
 
 def rebuild_matrix(skin, proxy_triangles, n_proxy, weld):
