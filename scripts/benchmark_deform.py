@@ -26,46 +26,51 @@ from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
 
+#: The add-on's drag tolerance (api.DRAG_TOL).
+DRAG_TOL = 1e-5
 DESIGN_ROWS = [
     ("Blender stack (Laplacian Deform proxy + Surface Deform), DESIGN.md", 0.081, 2.0, 4.3),
     ("full-resolution ARAP (libigl), DESIGN.md", 0.045, 1.86, 0.0),
 ]
 
 
-def drag_speed(points, triangles, faces, rigidity, steps=30):
+def drag_speed(points, triangles, faces, method, steps=30):
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     scenario = bend_scenario(points)
     ids, targets = scenario.proxy_constraints(sds)
     start = time.perf_counter()
-    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, rigidity=rigidity)
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, method=method)
     factor = time.perf_counter() - start
     rest = sds.proxy_vertices[ids]
     previous, times, iterations = None, [], []
     for k in range(1, steps + 1):
         start = time.perf_counter()
-        result = solver.solve(rest + (targets - rest) * (k / steps), initial=previous)
+        result = solver.solve(rest + (targets - rest) * (k / steps), initial=previous, tol=DRAG_TOL)
         times.append(time.perf_counter() - start)
         iterations.append(result.iterations)
         previous = result.vertices
-    return {"proxy_faces": int(sds.proxy_faces.shape[0]), "rigidity": rigidity, "factor_ms": 1000 * factor,
+    start = time.perf_counter()
+    settled = solver.solve(targets, max_iter=500, tol=1e-12)
+    settle = time.perf_counter() - start
+    return {"proxy_faces": int(sds.proxy_faces.shape[0]), "method": method, "factor_ms": 1000 * factor,
+            "settle_ms": 1000 * settle, "settle_iterations": settled.iterations,
             "step_ms_median": 1000 * float(np.median(times)), "iterations_median": float(np.median(iterations))}
 
 
-def bend_quality(points, triangles, faces, preserve_volume, rigidity, arap):
+def bend_quality(points, triangles, faces, preserve_volume, method, arap):
     scenario = bend_scenario(points)
     start = time.perf_counter()
     sds = SkinDetachedSurface.build(points, triangles, target_faces=faces)
     build = time.perf_counter() - start
     ids, targets = scenario.proxy_constraints(sds)
-    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume,
-                           rigidity=rigidity)
-    result = solver.solve(targets, max_iter=200, tol=1e-10)
-    detail = sds.reconstruct(result.vertices)
+    solver = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids, preserve_volume=preserve_volume, method=method)
+    result = solver.solve(targets, max_iter=500, tol=1e-10)
+    detail = sds.reconstruct(result.vertices, groups=scenario.proxy_groups(sds))
     diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     handle_error = np.linalg.norm(detail[scenario.handle_ids] - scenario.move(points[scenario.handle_ids]), axis=1)
     anchor_error = np.linalg.norm(detail[scenario.anchor_ids] - points[scenario.anchor_ids], axis=1)
     row = {
-        "preserve_volume": preserve_volume, "rigidity": rigidity, "proxy_faces": int(sds.proxy_faces.shape[0]), "build_s": build,
+        "preserve_volume": preserve_volume, "method": method, "proxy_faces": int(sds.proxy_faces.shape[0]), "build_s": build,
         "iterations": result.iterations, "converged": result.converged,
         "edge_distortion": edge_distortion(points, detail, triangles),
         "dihedral_change_deg": dihedral_change(points, detail, triangles),
@@ -90,23 +95,24 @@ def main():
     args = parser.parse_args()
     points, triangles = bundled(args.mesh)
 
-    speed = [drag_speed(points, triangles, faces, rigidity) for rigidity in (0.0, 1.0) for faces in (1000, 5000)]
-    print("## Dual-Laplacian proxy solve (bend scenario, 30 warm-started drag steps, tol 1e-6)\n")
-    print("| rigidity | proxy faces | factor ms | drag step ms (median) | iterations per step |")
-    print("|---|---|---|---|---|")
+    speed = [drag_speed(points, triangles, faces, method) for method in ("rotated", "paper") for faces in (1000, 5000)]
+    print(f"## Dual-Laplacian proxy solve (bend scenario, 30 warm-started drag steps at tol {DRAG_TOL:g}; "
+          f"settle from rest at tol 1e-12)\n")
+    print("| method | proxy faces | factor ms | drag step ms (median) | iterations per step | settle ms | settle iterations |")
+    print("|---|---|---|---|---|---|---|")
     for r in speed:
-        print(f"| {r['rigidity']:g} | {r['proxy_faces']} | {r['factor_ms']:.1f} | {r['step_ms_median']:.2f} | {r['iterations_median']:.0f} |")
+        print(f"| {r['method']} | {r['proxy_faces']} | {r['factor_ms']:.1f} | {r['step_ms_median']:.2f} "
+              f"| {r['iterations_median']:.0f} | {r['settle_ms']:.0f} | {r['settle_iterations']} |")
 
     arap, arap_s = arap_reference(points, triangles, bend_scenario(points), args.arap_iterations)
-    rows = [bend_quality(points, triangles, args.faces, flag, rigidity, arap)
-            for rigidity in (0.0, 1.0) for flag in (True, False)]
+    rows = [bend_quality(points, triangles, args.faces, flag, method, arap)
+            for method in ("rotated", "paper") for flag in (True, False)]
     print(f"\n## Bend scenario on {args.mesh}.obj ({points.shape[0]:,} vertices), proxy target {args.faces} faces\n")
     print("| method | edge distortion | dihedral change | handle error | anchor error | volume change (detail) "
           "| RMS vs ARAP |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
-        kind = "dual Laplacian (paper)" if r["rigidity"] == 0 else f"dual Laplacian + rigidity {r['rigidity']:g}"
-        name = f"Skin Detach, {kind}, volume {'kept' if r['preserve_volume'] else 'free'}"
+        name = f"Skin Detach, {r['method']}, volume {'kept' if r['preserve_volume'] else 'free'}"
         rms = f"{r['rms_vs_arap_pct_diag']:.2f} %" if "rms_vs_arap_pct_diag" in r else "n/a"
         print(f"| {name} | {r['edge_distortion']:.3f} | {r['dihedral_change_deg']:.2f} deg "
               f"| {r['handle_error_pct_diag']:.2e} % | {r['anchor_error_pct_diag']:.2e} % "

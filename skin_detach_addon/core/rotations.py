@@ -7,7 +7,7 @@ sum_j w_j |current_j - R rest_j|^2 (Kabsch; always a proper rotation, also for r
 or reflected C).
 
 Method: the eigenvectors V of the symmetric C^T C by cyclic Jacobi sweeps (vectorised over the
-r matrices; converged when the off-diagonal is below 1e-15 of the trace, at most
+r matrices; converged when the off-diagonal is below :data:`JACOBI_OFF` of the trace, at most
 :data:`MAX_SWEEPS` sweeps), then U from C V column by column (Gram-Schmidt, the third column
 the cross product, so det U = det V = 1) and R = U V^T.
 """
@@ -16,8 +16,11 @@ import numpy as np
 
 from .geometry import cross_rows
 
-#: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four).
+#: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four) ...
 MAX_SWEEPS = 8
+#: ... stopping when every off-diagonal sum is below this fraction of the trace (the rotations
+#: then agree with an SVD's to about 1e-12: U is recomputed from C V).
+JACOBI_OFF = 1e-10
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
@@ -28,7 +31,7 @@ def _jacobi(a, r):
     scale = np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2]) + 1e-300
     for _ in range(MAX_SWEEPS):
         off = np.abs(a[0, 1]) + np.abs(a[0, 2]) + np.abs(a[1, 2])
-        if not (off > 1e-15 * scale).any():
+        if not (off > JACOBI_OFF * scale).any():
             break
         for p, q in _PAIRS:
             o = 3 - p - q  # the third index
