@@ -65,8 +65,11 @@ DEFAULT_METHOD = "rotated"
 DEFAULT_RIGIDITY = {"rotated": 1.0, "paper": 0.0}
 #: Newton steps on the cubic volume-versus-step polynomial per iteration.
 VOLUME_NEWTON_STEPS = 3
-#: Past iterates mixed by Anderson acceleration of the normal-update iteration.
+#: Past iterates mixed by Anderson acceleration of the normal-update iteration (and of the
+#: rotated local-global steps when ``tol`` is below ANDERSON_BELOW: settling and continuation
+#: stages, not the loose solves of a drag, which stop after a couple of plain steps).
 ANDERSON_WINDOW = 5
+ANDERSON_BELOW = 1e-5
 #: Continuation of the "rotated" solve: constrained vertices moving more than STAGE_JUMP of the
 #: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
 STAGE_JUMP = 0.1
@@ -587,7 +590,8 @@ class DualLaplacian:
 
         targets, energy = self._rotated_targets(points)
         history, energies = [], [energy]
-        accelerator = _Anderson(ANDERSON_WINDOW)
+        # Anderson steps pay off when settling; a loose (drag) solve stops after a few plain steps.
+        accelerator = _Anderson(ANDERSON_WINDOW if tol < ANDERSON_BELOW else 0)
         current = points[free].copy()
         converged = False
         iterations = 0
