@@ -186,7 +186,6 @@ def _moved(empty):
 def sync_twins(obj, empties):
     """Move every twin whose partner moved since the last sync to the mirror image of the
     partner's motion (in ``obj``'s local space); when both moved, the older one leads."""
-    from mathutils import Matrix
     done = set()
     for empty in empties:
         twin = twin_of(empty)

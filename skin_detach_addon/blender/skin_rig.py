@@ -52,14 +52,18 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     triangles = mesh_io.read_triangles(mesh)
     surface = SkinDetachedSurface.build(positions.astype(np.float64), triangles, target_faces=target_faces,
                                         normal_test=normal_test, progress=progress)
-    old = handles.handles_of(obj)
+    old = []  # (empty, its detail ids or None): read before anything changes
+    for empty in handles.handles_of(obj):
+        try:
+            old.append((empty, handles.detail_ids_of(empty, surface.n_detail)))
+        except SkinDetachError:
+            old.append((empty, None))  # damaged: removed below
     _remove_proxy(obj)
     proxy = _make_proxy(obj, surface)
     stored.store(obj, surface, positions, proxy)
     kept = removed = 0
-    for empty in old:
-        detail = handles.detail_ids_of(empty)
-        if detail.size and detail.max() < surface.n_detail:
+    for empty, detail in old:
+        if detail is not None and detail.size:
             ids = surface.proxy_vertices_for(detail)
             handles.rebind(empty, proxy, ids, surface.proxy_vertices[ids].mean(axis=0))
             kept += 1
