@@ -52,7 +52,7 @@ def render(obj, rest, proxy, path, labels, pixels=1800):
     original.data.vertices.foreach_set("co", rest.astype(np.float32).ravel())
     original.data.update()
     cage = bpy.data.objects.new("proxy_view", proxy.data.copy())
-    wire = bpy.data.objects.new("proxy_wire", cage.data)
+    wire = bpy.data.objects.new("proxy_wire", cage.data.copy())  # its own mesh: its own colour
     result = bpy.data.objects.new("result", obj.data.copy())
     for item in (original, cage, wire, result):
         scene.collection.objects.link(item)
