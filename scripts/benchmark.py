@@ -42,7 +42,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 
 from bench import blender_stack
 from bench.arap import arap_reference
-from bench.meshes import ROOT, SIZES, blender_mesh, subdivided
+from bench.meshes import SIZES, blender_mesh, subdivided
 
 #: name -> (bundled mesh, flat subdivisions, proxy faces, paper row: model, vertices, proxy vertices, FPS, precompute)
 TABLE1 = {
@@ -171,7 +171,7 @@ def quality(rest, deformed, triangles, scenario, arap):
 
 
 def side_row(size, steps):
-    import bpy
+    import bpy  # noqa: F401  (first: the bpy module makes mathutils importable)
 
     from skin_detach_addon.blender import binding, mesh_io
     points, triangles = subdivided("armadillo", SIZES[size])

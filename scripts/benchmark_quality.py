@@ -105,7 +105,6 @@ def main():
                   f"{row['max_warm_cold']:.1e} | {row['settle_ms_median']:.1f} | {row['turned_back_to_rest']:.1e} |",
                   flush=True)
     print(f"\n## Bend scenario, proxy target {args.faces} faces\n")
-    summary = {}
     print("| mesh | vertices | method | edge distortion | dihedral change deg | handle error % diag "
           "| volume change % | converged | settle ms |")
     print("|---|---|---|---|---|---|---|---|---|")
