@@ -19,42 +19,64 @@ from .geometry import cross_rows
 #: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four) ...
 MAX_SWEEPS = 8
 #: ... stopping when every off-diagonal sum is below this fraction of the trace (the rotations
-#: then agree with an SVD's to about 1e-12: U is recomputed from C V).
-JACOBI_OFF = 1e-10
+#: then agree with an SVD's to about 1e-13: U is recomputed from C V).
+JACOBI_OFF = 1e-13
 _PAIRS = ((0, 1), (0, 2), (1, 2))
 
 
 def _jacobi(a, r):
     """Eigenvectors of symmetric 3x3 matrices given as a dict (i, j) -> (r,) of the six entries
-    i <= j (changed in place): returns v[row][col], lists of (r,) arrays."""
+    i <= j (changed in place): returns v[row][col], lists of (r,) arrays. After each sweep only
+    the matrices not yet converged take the next one (warm-started calls mostly need one)."""
     v = [[np.ones(r) if i == j else np.zeros(r) for j in range(3)] for i in range(3)]
     scale = np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2]) + 1e-300
+    todo = None  # None: all r matrices; else the indices still sweeping
     for _ in range(MAX_SWEEPS):
-        off = np.abs(a[0, 1]) + np.abs(a[0, 2]) + np.abs(a[1, 2])
-        if not (off > JACOBI_OFF * scale).any():
+        part_scale = scale if todo is None else scale[todo]
+        part = a if todo is None else {key: value[todo] for key, value in a.items()}
+        off = np.abs(part[0, 1]) + np.abs(part[0, 2]) + np.abs(part[1, 2])
+        busy = off > JACOBI_OFF * part_scale
+        if not busy.any():
             break
-        for p, q in _PAIRS:
-            o = 3 - p - q  # the third index
-            apq = a[p, q]
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
-                # apq = 0 gives tau = +-inf and t = 0 (no turn); 0/0 (a zero matrix) is cleared below.
-                t = np.copysign(1.0, tau) / (np.abs(tau) + np.sqrt(1.0 + tau * tau))
-            t[np.isnan(t)] = 0.0
-            c = 1.0 / np.sqrt(1.0 + t * t)
-            sn = t * c
-            a[p, p] = a[p, p] - t * apq
-            a[q, q] = a[q, q] + t * apq
-            a[p, q] = np.zeros(r)
-            po, qo = (min(p, o), max(p, o)), (min(q, o), max(q, o))
-            apo, aqo = a[po], a[qo]
-            a[po] = c * apo - sn * aqo
-            a[qo] = sn * apo + c * aqo
-            for row in v:
-                vp, vq = row[p], row[q]
-                row[p] = c * vp - sn * vq
-                row[q] = sn * vp + c * vq
+        if busy.mean() < 0.5:  # sweep only the unconverged ones from here on
+            todo = np.flatnonzero(busy) if todo is None else todo[busy]
+            part = {key: value[todo] for key, value in a.items()}
+        rows = v if todo is None else [[column[todo] for column in row] for row in v]
+        _sweep(part, rows)
+        if todo is not None:
+            for key, value in part.items():
+                a[key][todo] = value
+            for row, part_row in zip(v, rows):
+                for column, values in zip(row, part_row):
+                    column[todo] = values
     return v
+
+
+def _sweep(a, v):
+    """One cyclic Jacobi sweep over the matrices in ``a`` (dict of six entries), turning the
+    eigenvector columns ``v`` (v[row][col]) along; both changed in place."""
+    r = a[0, 0].shape[0]
+    for p, q in _PAIRS:
+        o = 3 - p - q  # the third index
+        apq = a[p, q]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+            # apq = 0 gives tau = +-inf and t = 0 (no turn); 0/0 (a zero matrix) is cleared below.
+            t = np.copysign(1.0, tau) / (np.abs(tau) + np.sqrt(1.0 + tau * tau))
+        t[np.isnan(t)] = 0.0
+        c = 1.0 / np.sqrt(1.0 + t * t)
+        sn = t * c
+        a[p, p] = a[p, p] - t * apq
+        a[q, q] = a[q, q] + t * apq
+        a[p, q] = np.zeros(r)
+        po, qo = (min(p, o), max(p, o)), (min(q, o), max(q, o))
+        apo, aqo = a[po], a[qo]
+        a[po] = c * apo - sn * aqo
+        a[qo] = sn * apo + c * aqo
+        for row in v:
+            vp, vq = row[p], row[q]
+            row[p] = c * vp - sn * vq
+            row[q] = sn * vp + c * vq
 
 
 def symmetric_eigenvectors(s):
