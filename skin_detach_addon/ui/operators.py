@@ -24,6 +24,15 @@ def solve_report(stats):
     return {'INFO'}, f"Skin Detach: {text}"
 
 
+def deform_and_report(operator, context):
+    """Solve the bound mesh behind the active object from its handles, tell live update, report."""
+    obj = bound_owner(context)
+    stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
+    live_update.remember(obj)
+    operator.report(*solve_report(stats))
+    return {'FINISHED'}
+
+
 class _Operator:
     def execute(self, context):
         try:
@@ -184,11 +193,7 @@ class SKIN_DETACH_OT_apply(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
-        obj = bound_owner(context)
-        stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
-        live_update.remember(obj)
-        self.report(*solve_report(stats))
-        return {'FINISHED'}
+        return deform_and_report(self, context)
 
 
 class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
@@ -210,11 +215,7 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         world = empty.matrix_world.copy()
         world.translation += Vector(self.offset)
         empty.matrix_world = world
-        obj = bound_owner(context)
-        stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
-        live_update.remember(obj)
-        self.report(*solve_report(stats))
-        return {'FINISHED'}
+        return deform_and_report(self, context)
 
     def invoke(self, context, event):
         if context.area is None or context.area.type != 'VIEW_3D':
