@@ -151,3 +151,28 @@ def test_the_panel_tells_conflicts_groups_the_target_and_the_add_operators_mirro
     obj.data.vertices.foreach_set("select", rest[:, 0] < -1.0)
     assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
     assert len(api.handles_of(obj)) == count + 3  # the ear and its twin
+
+
+def test_numbers_typed_in_the_drag_set_exact_moves_angles_and_factors(scene):
+    from blender_support import TopView, import_spot, rig
+    from skin_detach_addon.blender.drag_session import FINISHED, DragSession
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    start = np.array(handle.matrix_world)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("MOUSEMOVE", "NOTHING", (40, 0))          # the mouse moves it 0.4 along X first
+    session.event("Y", "PRESS", (40, 0))
+    for key in ("MINUS", "ZERO", "PERIOD", "TWO", "FIVE"):   # then exactly -0.25 along Y
+        session.event(key, "PRESS", (40, 0))
+    session.event("MOUSEMOVE", "NOTHING", (90, 70))          # ignored while a number is typed
+    moved = np.array(handle.matrix_world)
+    assert np.allclose(moved[:3, 3] - start[:3, 3], (0.4, -0.25, 0.0), atol=1e-9)
+    assert "-0.25 typed" in session.header
+    session.event("BACK_SPACE", "PRESS", (90, 70))           # -0.2
+    assert np.allclose(np.array(handle.matrix_world)[:3, 3] - start[:3, 3], (0.4, -0.2, 0.0), atol=1e-9)
+    session.event("R", "PRESS", (90, 70))                    # the same number as degrees about Y
+    turned = np.array(handle.matrix_world)
+    c, s = np.cos(np.radians(-0.2)), np.sin(np.radians(-0.2))
+    assert np.allclose(turned[:3, :3], np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ start[:3, :3], atol=1e-9)
+    assert session.event("RET", "PRESS", (90, 70)) == FINISHED
+    assert np.isfinite(positions(obj)).all()

@@ -17,6 +17,32 @@ _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
 _CONFIRM = {"LEFTMOUSE", "RET", "NUMPAD_ENTER"}
 _CANCEL = {"RIGHTMOUSE", "ESC"}
 _MODES = {"G": "MOVE", "R": "ROTATE", "S": "SCALE"}
+#: Keys of numeric input, as in Blender's transform: digits, point, minus (toggles the sign).
+_TYPED = {**{name: str(k) for k, name in enumerate(("ZERO", "ONE", "TWO", "THREE", "FOUR", "FIVE", "SIX", "SEVEN",
+                                                   "EIGHT", "NINE"))},
+          **{f"NUMPAD_{k}": str(k) for k in range(10)},
+          "PERIOD": ".", "NUMPAD_PERIOD": ".", "MINUS": "-", "NUMPAD_MINUS": "-"}
+
+
+def _typed(text, key):
+    """``text`` with one more typed ``key``: minus toggles the sign, a second point is ignored."""
+    if key == "-":
+        return text[1:] if text.startswith("-") else "-" + text
+    if key == "." and "." in text:
+        return text
+    return text + key
+
+
+def _stretch(factor, axis):
+    """(3, 3) scale by ``factor`` along world ``axis`` ("X", "Y", "Z"), or uniform when None."""
+    if not axis:
+        return Matrix.Identity(3) * factor
+    direction = _AXES[axis]
+    out = Matrix.Identity(3)
+    for i in range(3):
+        for j in range(3):
+            out[i][j] += (factor - 1.0) * direction[i] * direction[j]
+    return out
 
 
 class DragSession:
@@ -25,8 +51,11 @@ class DragSession:
     Keys: X/Y/Z constrain to a world axis (again: free); G moves in the view plane, R rotates
     about the view axis (or the constrained axis), S scales about the handle's centre (the mouse's
     distance from the centre on screen over that distance when S was pressed; along the
-    constrained axis only when one is set); pressing R or S again goes back to moving. LMB/Enter
-    confirms, RMB/Esc restores the empties, the mesh and the proxy exactly as they were.
+    constrained axis only when one is set); pressing R or S again goes back to moving. Typing a
+    number (digits, point, minus; Backspace edits) sets the move distance along the axis (X when
+    free), the angle in degrees or the scale factor exactly, on top of what the mouse did before;
+    the mouse is ignored while a number is typed. LMB/Enter confirms, RMB/Esc restores the
+    empties, the mesh and the proxy exactly as they were.
     """
 
     def __init__(self, obj, empty, view, mouse, preserve_volume=True):
@@ -38,6 +67,7 @@ class DragSession:
         self.mode, self.axis = "MOVE", None
         self.translation, self.angle = Vector((0.0, 0.0, 0.0)), 0.0
         self.stretch = Matrix.Identity(3)
+        self.typed = ""
         self._reference = Vector(mouse)
         self.step_ms = []
         self.last = None
@@ -46,13 +76,17 @@ class DragSession:
     def header(self):
         axis = f" along {self.axis}" if self.axis else ""
         timing = f"{self.step_ms[-1]:.1f} ms/step" if self.step_ms else "move the mouse"
+        if self.typed:
+            unit = {"MOVE": "", "ROTATE": " deg", "SCALE": "x"}[self.mode]
+            timing = f"{self.typed}{unit} typed, {timing}"
         return (f"Skin Detach {self.mode.lower()}{axis}: {timing} | "
                 f"X/Y/Z axis, G move, R rotate, S scale, LMB/Enter confirm, RMB/Esc cancel")
 
     def event(self, kind, value, mouse):
         """Feed one event (Blender's type and value names); returns RUNNING_MODAL, FINISHED or CANCELLED."""
         if kind == "MOUSEMOVE":
-            self._follow(Vector(mouse))
+            if not self.typed:  # while a number is typed, the mouse does not move the handle
+                self._follow(Vector(mouse))
             return RUNNING
         if value != "PRESS":
             return RUNNING
@@ -60,14 +94,40 @@ class DragSession:
             return self.confirm()
         if kind in _CANCEL:
             return self.cancel()
-        if kind in _AXES or kind in _MODES:
-            self._settle(Vector(mouse))
+        if kind in _TYPED or (kind == "BACK_SPACE" and self.typed):
+            if not self.typed:
+                self._settle(Vector(mouse))  # the number applies on top of what the mouse did so far
+            self.typed = self.typed[:-1] if kind == "BACK_SPACE" else _typed(self.typed, _TYPED[kind])
+            self._apply_typed()
+        elif kind in _AXES or kind in _MODES:
+            if not self.typed:
+                self._settle(Vector(mouse))
             if kind in _MODES:
                 self.mode = "MOVE" if self.mode == _MODES[kind] else _MODES[kind]
             else:
                 self.axis = None if self.axis == kind else kind
-            self._follow(Vector(mouse))
+            if self.typed:
+                self._apply_typed()
+            else:
+                self._follow(Vector(mouse))
         return RUNNING
+
+    def _apply_typed(self):
+        """The typed number as a distance (move: along the constrained axis, X when free), an
+        angle in degrees (rotate) or a factor (scale), on top of the settled offsets."""
+        try:
+            number = float(self.typed)
+        except ValueError:  # "-" or "." so far: nothing yet
+            number = None
+        translation, angle, stretch = self.translation.copy(), self.angle, self.stretch.copy()
+        if number is not None:
+            if self.mode == "MOVE":
+                translation += _AXES[self.axis or "X"] * number
+            elif self.mode == "ROTATE":
+                angle += math.radians(number)
+            else:
+                stretch = _stretch(number, self.axis) @ stretch
+        self._place(self._compose(translation, angle, stretch))
 
     def _settle(self, mouse):
         """Keep what the mouse did so far and measure from ``mouse`` on."""
@@ -79,16 +139,7 @@ class DragSession:
         if self.mode == "SCALE":
             centre = Vector(self.view.to_screen(self.pivot + self.translation))
             before, now = (self._reference - centre).length, (mouse - centre).length
-            factor = now / before if before > 1e-6 else 1.0
-            if self.axis:
-                direction = _AXES[self.axis]
-                step = Matrix.Identity(3)
-                for i in range(3):
-                    for j in range(3):
-                        step[i][j] += (factor - 1.0) * direction[i] * direction[j]
-            else:
-                step = Matrix.Identity(3) * factor
-            stretch = step @ stretch
+            stretch = _stretch(now / before if before > 1e-6 else 1.0, self.axis) @ stretch
         elif self.mode == "MOVE":
             here = self.pivot + self.translation
             delta = self.view.to_world(mouse, here) - self.view.to_world(self._reference, here)
@@ -105,14 +156,19 @@ class DragSession:
 
     def matrix(self, mouse):
         """World matrix of the empty for the mouse at ``mouse``."""
-        translation, angle, stretch = self._offsets(Vector(mouse))
+        return self._compose(*self._offsets(Vector(mouse)))
+
+    def _compose(self, translation, angle, stretch):
         axis = _AXES[self.axis] if self.axis else -Vector(self.view.direction)
         turn = Matrix.Rotation(angle, 4, axis)
         return (Matrix.Translation(self.pivot + translation) @ turn @ stretch.to_4x4() @
                 Matrix.Translation(-self.pivot)) @ self.start
 
     def _follow(self, mouse):
-        self.empty.matrix_world = self.matrix(mouse)
+        self._place(self.matrix(mouse))
+
+    def _place(self, matrix):
+        self.empty.matrix_world = matrix
         self.last = self.deformation.step(tol=DRAG_TOL)
         self.step_ms.append(self.last.milliseconds)
 
