@@ -2,7 +2,8 @@
 the bend scenario, and scale, printed as Markdown tables.
 
     python scripts/benchmark.py [--parts table1,side,scale] [--table1 bunny,armadillo,bunny-418K]
-                                [--side 50K,300K] [--scale 1.2M,1.8M] [--steps 30] [--quick] [--json PATH]
+                                [--side 50K,300K] [--scale 1.2M,1.8M] [--large 800K,3.2M] [--steps 30]
+                                [--quick] [--json PATH]
 
 Every mesh runs in its own process (bpy module), so each peak memory figure is that run's own.
 ``--quick`` is the CI run: the 50K armadillo once in every part, few steps.
@@ -22,6 +23,10 @@ iterations, where libigl is installed, at 50K). Ratios are ours / theirs.
 
 Scale: core build, drag step and peak memory at 1.2M and 1.8M vertices (the armadillo
 flat-subdivided twice; 1.8M stands in for the 2M row).
+
+Large: the modal drag at 800K and 3.2M vertices as DragSession drives it with a fake view
+(build seconds and the peak memory it adds, ms per mouse move with Blender's depsgraph update,
+confirm seconds).
 """
 
 import argparse
@@ -222,9 +227,46 @@ def scale_row(size, steps):
             "build_s_per_million": build / (points.shape[0] / 1e6), "step_ms_per_million": step / (points.shape[0] / 1e6)}
 
 
+def large_row(size, steps):
+    """The modal drag at scale, as DragSession drives it (fake top view): build seconds and the
+    peak memory it adds (the Blender mesh itself not counted), median ms per mouse move (solve,
+    rebuild, write-back and Blender's depsgraph update), and the confirm's seconds."""
+    import bpy
+
+    from bench.scenario import bend_scenario
+    from bench.views import TopView
+    from skin_detach_addon import api
+    points, triangles = subdivided("armadillo", SIZES[size])
+    fresh_scene()
+    obj = blender_mesh("armadillo", points, triangles)
+    del triangles
+    bpy.context.view_layer.update()
+    before = peak_mb()
+    start = time.perf_counter()
+    api.build(obj, target_faces=1000)
+    build = time.perf_counter() - start
+    build_peak = peak_mb() - before
+    scenario = bend_scenario(points)
+    api.add_anchor(obj, scenario.anchor_ids)
+    handle = api.add_handle(obj, scenario.handle_ids)
+    session = api.DragSession(obj, handle, TopView(0.002), (0, 0))
+    times = []
+    for k in range(1, steps + 1):
+        start = time.perf_counter()
+        session.event("MOUSEMOVE", "NOTHING", (10 * k, 5 * k))
+        bpy.context.view_layer.update()
+        times.append(time.perf_counter() - start)
+    start = time.perf_counter()
+    session.event("RET", "PRESS", (10 * steps, 5 * steps))
+    bpy.context.view_layer.update()
+    confirm = time.perf_counter() - start
+    return {"size": size, "vertices": int(points.shape[0]), "build_s": build, "build_peak_mb_added": build_peak,
+            "move_ms": median_ms(times), "confirm_s": confirm, "peak_mb": peak_mb()}
+
+
 def run_one(spec, steps):
     part, name = spec.split(":", 1)
-    return {"table1": table1_row, "side": side_row, "scale": scale_row}[part](name, steps)
+    return {"table1": table1_row, "side": side_row, "scale": scale_row, "large": large_row}[part](name, steps)
 
 
 def in_subprocess(spec, steps):
@@ -296,9 +338,19 @@ def print_scale(rows):
               f"| {r['step_ms_per_million']:.1f} | {r['peak_mb']:.0f} |")
 
 
+def print_large(rows):
+    print("\n## The modal drag at scale (DragSession + depsgraph update per mouse move, 1,000-face proxy)\n")
+    print("| vertices | build s | build adds MB to peak | move ms (median) | confirm s | peak MB |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['vertices']:,} | {r['build_s']:.2f} | {r['build_peak_mb_added']:.0f} | {r['move_ms']:.1f} "
+              f"| {r['confirm_s']:.2f} | {r['peak_mb']:.0f} |")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--parts", default="table1,side,scale")
+    parser.add_argument("--parts", default="table1,side,scale,large")
+    parser.add_argument("--large", default="800K,3.2M")
     parser.add_argument("--table1", default="bunny,armadillo,bunny-418K")
     parser.add_argument("--side", default="50K,300K")
     parser.add_argument("--scale", default="1.2M,1.8M")
@@ -311,7 +363,7 @@ def main():
         print(json.dumps(run_one(args.one, args.steps)))
         return
     if args.quick:
-        args.table1, args.side, args.scale, args.steps = "armadillo-50K", "50K", "50K", 5
+        args.table1, args.side, args.scale, args.large, args.steps = "armadillo-50K", "50K", "50K", "50K", 5
     parts = [p for p in args.parts.split(",") if p]
     figures = {"machine": {"cores": os.cpu_count(), "python": sys.version.split()[0]}}
     for name in [n for n in args.table1.split(",") if n] if "table1" in parts else []:
@@ -326,6 +378,9 @@ def main():
     if "scale" in parts:
         figures["scale"] = [in_subprocess(f"scale:{s}", args.steps) for s in args.scale.split(",") if s]
         print_scale(figures["scale"])
+    if "large" in parts:
+        figures["large"] = [in_subprocess(f"large:{s}", args.steps) for s in args.large.split(",") if s]
+        print_large(figures["large"])
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
         with open(args.json, "w", encoding="utf-8") as handle:

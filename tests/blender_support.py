@@ -7,6 +7,7 @@ from mathutils import Vector
 
 import bpy
 
+from bench.views import TopView  # noqa: F401  (tests import it from here)
 from skin_detach_addon.blender import handles, mesh_io
 
 DATA = pathlib.Path(__file__).parent / "data"
@@ -114,18 +115,3 @@ def all_data(mesh):
 def vertex_group_weights(obj):
     mesh = obj.data
     return [[(g.group, g.weight) for g in v.groups] for v in mesh.vertices]
-
-
-class TopView:
-    """Orthographic top view: one pixel is ``scale`` world units, looking down -Z."""
-
-    direction = Vector((0.0, 0.0, -1.0))
-
-    def __init__(self, scale=0.01):
-        self.scale = scale
-
-    def to_world(self, mouse, depth_point):
-        return Vector((mouse[0] * self.scale, mouse[1] * self.scale, depth_point[2]))
-
-    def to_screen(self, point):
-        return Vector((point[0] / self.scale, point[1] / self.scale))

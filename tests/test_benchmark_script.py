@@ -29,7 +29,8 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
     run = subprocess.run([sys.executable, str(BENCHMARK), "--quick", "--json", str(tmp_path / "b.json")],
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
-    for title in ("## Table 1 of the paper", "## Side by side", "## Scale", "ratios ours / Blender stack"):
+    for title in ("## Table 1 of the paper", "## Side by side", "## Scale", "ratios ours / Blender stack",
+                  "## The modal drag at scale"):
         assert title in run.stdout
     figures = json.loads((tmp_path / "b.json").read_text())
     table1, side, scale = figures["table1"][0], figures["side"][0], figures["scale"][0]
@@ -41,6 +42,8 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
     assert side["skin_detach"]["quality"]["handle_error_pct_diag"] < 0.01  # the handle is reached exactly
     for key in ("build_s", "step_ms", "peak_mb"):
         assert key in scale, key
+    large = figures["large"][0]
+    assert large["vertices"] == 49990 and large["move_ms"] > 0 and large["confirm_s"] > 0
     found = dict(numbers(figures))
     assert len(found) > 30
     bad = {path: value for path, value in found.items() if not math.isfinite(value)}
