@@ -79,27 +79,6 @@ def _sweep(a, v):
             row[q] = sn * vp + c * vq
 
 
-def symmetric_eigenvectors(s):
-    """(r, 3) eigenvalues, descending, and (r, 3, 3) eigenvectors (columns, det +1) of the
-    symmetric matrices ``s`` (r, 3, 3)."""
-    s = np.asarray(s, dtype=np.float64)
-    a = {(i, j): s[:, i, j].copy() for i in range(3) for j in range(i, 3)}
-    v = _jacobi(a, s.shape[0])
-    values = np.stack([a[0, 0], a[1, 1], a[2, 2]], axis=1)
-    vectors = np.array(v).transpose(2, 0, 1)  # (r, row, col)
-    order = np.argsort(-values, axis=1)
-    values = np.take_along_axis(values, order, axis=1)
-    vectors = np.take_along_axis(vectors, order[:, None, :], axis=2)
-    det = np.einsum("ij,ij->i", vectors[:, :, 0], cross_rows(vectors[:, :, 1], vectors[:, :, 2]))
-    vectors[det < 0, :, 2] *= -1.0
-    return values, vectors
-
-
-def _unit(x, y, z):
-    n = np.sqrt(x * x + y * y + z * z)
-    return n, np.where(n > 0.0, n, 1.0)
-
-
 def best_rotations(covariance):
     """(r, 3, 3) proper rotations R_i maximising trace(R_i^T C_i) for ``covariance`` (r, 3, 3)."""
     return _fit(covariance, None)[0]
