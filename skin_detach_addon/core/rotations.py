@@ -79,6 +79,11 @@ def _sweep(a, v):
             row[q] = sn * vp + c * vq
 
 
+def _unit(x, y, z):
+    n = np.sqrt(x * x + y * y + z * z)
+    return n, np.where(n > 0.0, n, 1.0)
+
+
 def best_rotations(covariance):
     """(r, 3, 3) proper rotations R_i maximising trace(R_i^T C_i) for ``covariance`` (r, 3, 3)."""
     return _fit(covariance, None)[0]
