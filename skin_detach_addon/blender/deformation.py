@@ -93,18 +93,19 @@ class Deformation:
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return result, detail
 
-    def step(self, tol=SETTLE_TOL):
-        """:meth:`solve`, then write the mesh and the proxy and record the written digest and
-        the step's figures on the binding; returns a :class:`StepReport`."""
+    def step(self, tol=SETTLE_TOL, mark=True):
+        """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
+        binding (and, with ``mark``, the written digest: a drag marks only its last step, the
+        confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
         result, detail = self.solve(tol)
-        self._write(detail, result.vertices)
+        self._write(detail, result.vertices, mark)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
         self.binding.last_step = report.figures()
         return report
 
-    def _write(self, detail, proxy_positions):
+    def _write(self, detail, proxy_positions, mark=True):
         """Write the mesh and the proxy, or neither: every check comes first."""
         for name, values in (("rebuilt positions", detail), ("proxy positions", proxy_positions)):
             if not np.isfinite(values).all():
@@ -116,7 +117,8 @@ class Deformation:
                                       f"(nothing was written)")
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
-        stored.mark_written(self.obj, detail)
+        if mark:
+            stored.mark_written(self.obj, detail)
 
     def snapshot(self):
         """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change."""

@@ -55,7 +55,8 @@ class DragSession:
     number (digits, point, minus; Backspace edits) sets the move distance along the axis (X when
     free), the angle in degrees or the scale factor exactly, on top of what the mouse did before;
     the mouse is ignored while a number is typed. LMB/Enter confirms, RMB/Esc restores the
-    empties, the mesh and the proxy exactly as they were.
+    empties, the mesh and the proxy exactly as they were. A session ends with one of them:
+    only the confirm records the written positions (moves skip that per-move checksum).
     """
 
     def __init__(self, obj, empty, view, mouse, preserve_volume=True):
@@ -169,7 +170,7 @@ class DragSession:
 
     def _place(self, matrix):
         self.empty.matrix_world = matrix
-        self.last = self.deformation.step(tol=DRAG_TOL)
+        self.last = self.deformation.step(tol=DRAG_TOL, mark=False)  # confirm marks (or cancel restores)
         self.step_ms.append(self.last.milliseconds)
 
     def confirm(self):
