@@ -340,3 +340,17 @@ def test_detail_carried_by_one_rigid_group_moves_exactly_with_it(bundled):
     assert np.abs(detail[scenario.anchor_ids] - points[scenario.anchor_ids]).max() <= 1e-9 * diagonal(points)
     with pytest.raises(SkinDetachError, match="groups"):
         sds.reconstruct(bent, groups=groups[:-1])
+
+
+def test_rebuild_refuses_non_finite_proxies_instead_of_writing_nan():
+    points, tris = plane(6)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=20)
+    broken = sds.proxy_vertices.copy()
+    broken[0, 1] = np.nan
+    with pytest.raises(SkinDetachError, match="proxy_vertices"):
+        sds.reconstruct(broken)
+    from skin_detach_addon.core.reconstruction import Rebuild, rebuild_matrix
+    rebuild = Rebuild(rebuild_matrix(sds.skin, sds.proxy_faces, sds.proxy_vertices.shape[0], sds.weld),
+                      sds.proxy_vertices, sds.proxy_faces)
+    with pytest.raises(SkinDetachError, match="finite"):
+        rebuild(broken)  # the check lives in the rebuild itself, not only in the input validation

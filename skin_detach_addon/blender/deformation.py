@@ -107,10 +107,11 @@ class Deformation:
 
     def _write(self, detail, proxy_positions, mark=True):
         """Write the mesh and the proxy, or neither: every check comes first."""
-        for name, values in (("rebuilt positions", detail), ("proxy positions", proxy_positions)):
-            if not np.isfinite(values).all():
-                raise SkinDetachError(f"object {self.obj.name!r}: expected finite {name}, the solve gave NaN or "
-                                      f"inf (nothing was written); check the handles' transforms")
+        # The detail comes from the stored rest or from a rebuild, which refuses non-finite inputs
+        # (core.reconstruction), so only the small proxy array needs a look here.
+        if not np.isfinite(proxy_positions).all():
+            raise SkinDetachError(f"object {self.obj.name!r}: expected finite proxy positions, the solve gave NaN or "
+                                  f"inf (nothing was written); check the handles' transforms")
         for target in (self.obj, self.proxy):
             if target.mode == 'EDIT' or target.data.is_editmode:
                 raise SkinDetachError(f"object {target.name!r}: expected Object Mode, its mesh is in Edit Mode "

@@ -18,6 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import scipy.sparse as sp
 
+from .errors import SkinDetachError
 from .geometry import cotangent_weights, face_cross, unique_edges
 from .rotations import WarmRotations
 
@@ -162,6 +163,11 @@ class Rebuild:
         stacked = self._stacked
         stacked[:, :self.n_proxy] = points.T
         stacked[:, self.n_proxy:] = self.frame_vectors(points, groups).T
+        # W is finite (checked where it is loaded), so finite inputs give a finite result: checking
+        # the m + 3k inputs here spares a pass over all n outputs on every drag move.
+        if not np.isfinite(stacked).all():
+            raise SkinDetachError("proxy_vertices: expected positions whose rebuild frames are finite, got NaN or inf "
+                                  "(degenerate or absurd proxy); nothing was rebuilt")
         if out is None:
             out = np.empty((self.n_detail, 3))
         blocks = self._blocks
