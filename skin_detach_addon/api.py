@@ -23,6 +23,7 @@ from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
 from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession
+from .blender.skin_rig import PREVIEW_ABOVE
 from .core.errors import SkinDetachError
 from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
@@ -31,7 +32,7 @@ __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "re
            "is_bound", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
-           "SETTLE_TOL", "RUNNING", "FINISHED", "CANCELLED"]
+           "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
 
@@ -51,17 +52,24 @@ def _bound(obj):
     return owner
 
 
-def build(obj, target_faces=1000, normal_test=True, progress=None):
+def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above=PREVIEW_ABOVE):
     """Bind ``obj`` (a mesh object in Object Mode) to a proxy of about ``target_faces`` triangles
     and make the proxy object; returns the build figures (dict: seconds per stage, proxy_faces,
-    case1/2/3 counts, handles_kept, ...). A previous binding is replaced: handles made from mesh
-    vertices are kept (back at rest), those made from proxy vertices are removed.
-    ``progress(fraction, stage)`` is called as the build goes."""
+    preview_vertices, case1/2/3 counts, handles_kept, ...). A previous binding is replaced:
+    handles made from mesh vertices are kept (back at rest), those made from proxy vertices are
+    removed. ``progress(fraction, stage)`` is called as the build goes.
+
+    A mesh of more than ``preview_above`` vertices (None: never) also gets a preview: a hidden
+    object of about 100,000 vertices bound to the same proxy, which :class:`DragSession` (and
+    :func:`deform` with ``preview=True``) shows in place of the mesh while handles move."""
+    if preview_above is not None and (isinstance(preview_above, bool) or not isinstance(preview_above, (int, np.integer))
+                                      or preview_above < 0):
+        raise SkinDetachError(f"preview_above: expected None or a vertex count >= 0, got {preview_above!r}")
     obj = _owner(obj)
     skin_rig.check_mesh_object(obj)
     if obj.mode == 'EDIT' or obj.data.is_editmode:
         raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
-    return skin_rig.build(obj, target_faces, normal_test, progress)
+    return skin_rig.build(obj, target_faces, normal_test, preview_above, progress)
 
 
 def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
@@ -124,16 +132,23 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     return empty
 
 
-def deform(obj, preserve_volume=True, tol=SETTLE_TOL):
+def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False):
     """Solve the proxy from the current transforms of every handle and anchor of ``obj`` and
     write the rebuilt positions into its mesh (and the proxy). ``tol``: :data:`SETTLE_TOL` for a
     result to keep, :data:`DRAG_TOL` while interacting. Returns a dict: milliseconds, iterations,
-    converged, volume_change (of the proxy). Raises, writing nothing, when the mesh was edited
-    since Skin Detach last wrote it."""
+    converged, volume_change (of the proxy), preview. Raises, writing nothing, when the mesh was
+    edited since Skin Detach last wrote it.
+
+    ``preview=True`` on a mesh with a preview object writes the preview instead and shows it in
+    place of the mesh, which keeps what it holds until the next full deform (falls back to the
+    full detail without a preview)."""
     import bpy
     obj = _bound(obj)
     bpy.context.view_layer.update()  # world matrices of handles moved by a script
-    return Deformation(obj, preserve_volume).step(tol).figures()
+    deformation = Deformation(obj, preserve_volume)
+    if preview and deformation.preview is not None:
+        return dict(deformation.preview_step(tol).figures(), preview=True)
+    return dict(deformation.step(tol).figures(), preview=False)
 
 
 def reset(obj):

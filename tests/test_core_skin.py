@@ -68,7 +68,7 @@ def test_fast_search_matches_exhaustive_search(make):
     points, tris = make()
     points = np.concatenate([points, [[0.5, 0.5, 3.0]]])  # one loose vertex
     mesh = prepare_mesh(points, tris)
-    proxy = simplify(mesh, 60)
+    proxy = simplify(mesh.points, mesh.triangles, mesh.components, 60)
     fast, _ = bind_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
     slow = reference_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
     assert np.array_equal(fast.case, slow.case)
@@ -83,7 +83,7 @@ def test_fast_search_matches_exhaustive_search(make):
 def test_fast_search_fixtures_reach_every_case():
     points, tris = noisy_box()
     mesh = prepare_mesh(points, tris)
-    proxy = simplify(mesh, 60)
+    proxy = simplify(mesh.points, mesh.triangles, mesh.components, 60)
     skin, _ = bind_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles)
     assert {1, 2, 3} <= set(np.unique(skin.case).tolist())
 
@@ -124,7 +124,7 @@ def test_closed_mouth_tears_with_the_papers_own_rules():
     """The same scenario with the paper's unrestricted candidates mis-attaches lips."""
     points, tris, lower, upper = closed_mouth()
     mesh = prepare_mesh(points, tris)
-    proxy = simplify(mesh, 300)
+    proxy = simplify(mesh.points, mesh.triangles, mesh.components, 300)
     skin = reference_skin(mesh.points, mesh.normals, proxy.carrier, proxy.points, proxy.triangles, paper=True)
     lower_motion, upper_motion, lift = _mouth_motion(points, tris, lower, upper, proxy.points, proxy.triangles,
                                                      proxy.carrier, skin, mesh.weld)

@@ -15,13 +15,17 @@ import numpy as np
 
 from ..core.dual_laplacian import DualLaplacian
 from ..core.errors import SkinDetachError
-from ..core.surface import SkinDetachedSurface
+from ..core.surface import Preview, SkinDetachedSurface
 from ..core.symmetry import mirror_map
 from . import mesh_io
 
 KEY = "_skin_detach"
-#: A proxy object points back at its mesh under this key.
+#: A proxy object points back at its mesh under this key ...
 PROXY_TAG = "_skin_detach_proxy_of"
+#: ... and a preview object under this one.
+PREVIEW_TAG = "_skin_detach_preview_of"
+#: Stored arrays of the preview's skin carry this prefix.
+PREVIEW_PREFIX = "preview_"
 #: Iterations a proxy solve may take before it reports that it did not converge.
 MAX_ITERATIONS = 300
 SCHEMA_VERSION = 1
@@ -34,15 +38,18 @@ class Binding:
     surface  SkinDetachedSurface over the mesh's n vertices
     rest     (n, 3) float32 rest positions, exactly as they were in the mesh
     proxy    the proxy object
+    preview  core Preview (c vertices over the same proxy) or None
     """
 
-    def __init__(self, binding_id, surface, rest, proxy):
+    def __init__(self, binding_id, surface, rest, proxy, preview=None):
         self.binding_id = binding_id
         self.surface = surface
         self.rest = rest
         self.proxy = proxy
+        self.preview = preview
         self._solvers = {}
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
+        self._preview_buffer = None if preview is None else np.empty((preview.points.shape[0], 3), dtype=np.float32)
         #: Figures of the last step in this session (dict, see StepReport.figures), or None.
         self.last_step = None
         self._mirrors = {}
@@ -79,13 +86,33 @@ class Binding:
         to keep it past the next call)."""
         return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups)
 
+    def rebuild_preview(self, proxy_vertices, groups=None):
+        """(c, 3) float32 preview positions from deformed proxy vertices (m, 3), in a reused buffer."""
+        return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=groups)
+
 
 def has_binding(obj):
     return obj is not None and obj.type == 'MESH' and KEY in obj
 
 
-def store(obj, surface, rest, proxy):
-    """Write the binding of ``obj`` (replacing any) and return its :class:`Binding`."""
+def _flat_props(arrays, prefix=""):
+    """ID-property values of a core ``to_arrays`` dict: strings, scalars, int32 or float64 flat arrays."""
+    props = {}
+    for key, value in arrays.items():
+        if value.dtype.kind in "US":
+            props[prefix + key] = str(value)
+        elif value.ndim == 0:
+            props[prefix + key] = value.item()
+        elif value.dtype.kind in "iu":
+            props[prefix + key] = value.astype(np.int32).ravel()
+        else:
+            props[prefix + key] = value.astype(np.float64).ravel()
+    return props
+
+
+def store(obj, surface, rest, proxy, preview=None):
+    """Write the binding of ``obj`` (replacing any; ``preview``: the preview object of
+    ``surface.preview``, or None) and return its :class:`Binding`."""
     props = {
         "schema_version": SCHEMA_VERSION,
         "binding_id": uuid.uuid4().hex,
@@ -94,17 +121,13 @@ def store(obj, surface, rest, proxy):
         "proxy": proxy,
         "rest": np.ascontiguousarray(rest, dtype=np.float32).ravel(),
     }
-    for key, value in surface.to_arrays().items():
-        if value.dtype.kind in "US":
-            props[key] = str(value)
-        elif value.ndim == 0:
-            props[key] = value.item()
-        elif value.dtype.kind in "iu":
-            props[key] = value.astype(np.int32).ravel()
-        else:
-            props[key] = value.astype(np.float64).ravel()
+    props.update(_flat_props(surface.to_arrays()))
+    if preview is not None:
+        props["preview"] = preview
+        props.update(_flat_props(surface.preview.to_arrays(), PREVIEW_PREFIX))
     obj[KEY] = props
-    binding = Binding(props["binding_id"], surface, props["rest"].reshape(-1, 3), proxy)
+    binding = Binding(props["binding_id"], surface, props["rest"].reshape(-1, 3), proxy,
+                      surface.preview if preview is not None else None)
     _CACHE[binding.binding_id] = binding
     return binding
 
@@ -170,13 +193,19 @@ def open_binding(obj):
     binding = _CACHE.get(binding_id)
     if binding is None:
         arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
-                  for key, value in props.items() if key != "proxy"}
-        surface = SkinDetachedSurface.from_arrays(arrays, source=f"binding of {obj.name!r}")
+                  for key, value in props.items() if key not in ("proxy", "preview")}
+        surface = SkinDetachedSurface.from_arrays(
+            {key: value for key, value in arrays.items() if not key.startswith(PREVIEW_PREFIX)},
+            source=f"binding of {obj.name!r}")
+        preview = None
+        if PREVIEW_PREFIX + "format_tag" in arrays:
+            preview = Preview.from_arrays({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
+                                           if key.startswith(PREVIEW_PREFIX)}, source=f"preview of {obj.name!r}")
         rest = _checked_rest(obj, props, n)
         if surface.n_detail != n:
             raise SkinDetachError(f"binding of {obj.name!r}: expected a skin over the mesh's {n} vertices, got "
                                   f"{surface.n_detail}; press Rebuild")
-        binding = Binding(binding_id, surface, rest, proxy)
+        binding = Binding(binding_id, surface, rest, proxy, preview)
         _CACHE[binding.binding_id] = binding
     binding.proxy = proxy  # never keep a Blender reference across undo or reload
     return binding
@@ -208,6 +237,21 @@ def proxy_of(obj):
             or not proxy.users_scene:
         return None
     return proxy
+
+
+def preview_of(obj):
+    """The preview object of ``obj`` when it has one, it still exists and it matches the stored
+    preview (same vertex count), else None (a drag then shows the full detail)."""
+    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
+        return None
+    preview = obj[KEY].get("preview")
+    if preview is None or not hasattr(preview, "users_scene") or getattr(preview, "type", None) != 'MESH' \
+            or not preview.users_scene or preview.get(PREVIEW_TAG) != obj:
+        return None
+    count = obj[KEY].get(PREVIEW_PREFIX + "weld")
+    if count is None or len(preview.data.vertices) != len(count):
+        return None
+    return preview
 
 
 def check_unedited(obj):

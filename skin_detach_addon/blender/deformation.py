@@ -76,17 +76,21 @@ class Deformation:
         """The handle and anchor empties of the object, sorted by name."""
         return handles.handles_of(self.obj, self.proxy)
 
-    def solve(self, tol=SETTLE_TOL):
-        """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
-        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
-        positions (a buffer the next call reuses)."""
+    def _solve_proxy(self, tol):
+        """(empties, :class:`DualLaplacianResult`, rigid groups (m,)) from the handles' transforms."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
         ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol)
+        return empties, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol), groups
+
+    def solve(self, tol=SETTLE_TOL):
+        """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
+        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
+        positions (a buffer the next call reuses)."""
+        empties, result, groups = self._solve_proxy(tol)
         detail = self.binding.rebuild(result.vertices, groups)
         axis = handles.symmetry_axis(empties)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
@@ -105,21 +109,66 @@ class Deformation:
         self.binding.last_step = report.figures()
         return report
 
-    def _write(self, detail, proxy_positions, mark=True):
-        """Write the mesh and the proxy, or neither: every check comes first."""
+    @property
+    def preview(self):
+        """The preview object a drag may show instead of the mesh, or None."""
+        return stored.preview_of(self.obj) if self.binding.preview is not None else None
+
+    def preview_step(self, tol=DRAG_TOL):
+        """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
+        shows the preview in place of the mesh (see :meth:`show_preview`). Returns a
+        :class:`StepReport` whose positions are the preview's (c, 3)."""
+        preview = self.preview
+        if preview is None:
+            raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
+                                  f"deleted); press Rebuild")
+        start = time.perf_counter()
+        _, result, groups = self._solve_proxy(tol)
+        positions = self.binding.rebuild_preview(result.vertices, groups)
+        self._check_writable(result.vertices, (self.proxy, preview))
+        mesh_io.write_positions(preview.data, positions)
+        mesh_io.write_positions(self.proxy.data, result.vertices)
+        self.show_preview(True)
+        report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
+                            result.volume_change, positions)
+        self.binding.last_step = dict(report.figures(), preview=True)
+        return report
+
+    def show_preview(self, shown):
+        """Show the preview object and hide the mesh in viewports, or the other way round. The
+        mesh's own state is remembered on the first show and given back exactly."""
+        preview = self.preview
+        if preview is None:
+            return
+        if shown and preview.hide_viewport:
+            self.obj[stored.KEY]["mesh_hidden"] = bool(self.obj.hide_viewport)
+            preview.hide_viewport = False
+            self.obj.hide_viewport = True
+        elif not shown and not preview.hide_viewport:
+            preview.hide_viewport = True
+            self.obj.hide_viewport = bool(self.obj[stored.KEY].get("mesh_hidden", False))
+
+    def _check_writable(self, proxy_positions, targets):
+        """Raise, writing nothing, unless the solved proxy is finite and no target is in Edit Mode."""
         # The detail comes from the stored rest or from a rebuild, which refuses non-finite inputs
         # (core.reconstruction), so only the small proxy array needs a look here.
         if not np.isfinite(proxy_positions).all():
             raise SkinDetachError(f"object {self.obj.name!r}: expected finite proxy positions, the solve gave NaN or "
                                   f"inf (nothing was written); check the handles' transforms")
-        for target in (self.obj, self.proxy):
+        for target in targets:
             if target.mode == 'EDIT' or target.data.is_editmode:
                 raise SkinDetachError(f"object {target.name!r}: expected Object Mode, its mesh is in Edit Mode "
                                       f"(nothing was written)")
+
+    def _write(self, detail, proxy_positions, mark=True):
+        """Write the mesh and the proxy, or neither: every check comes first. The mesh is shown
+        again if a preview stood in for it."""
+        self._check_writable(proxy_positions, (self.obj, self.proxy))
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
         if mark:
             stored.mark_written(self.obj, detail)
+        self.show_preview(False)
 
     def snapshot(self):
         """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change."""
@@ -135,6 +184,7 @@ class Deformation:
         mesh_io.restore(self.obj.data, saved.mesh)
         mesh_io.restore(self.proxy.data, saved.proxy)
         stored.set_written_digest(self.obj, saved.digest)
+        self.show_preview(False)
         self.binding.forget_warm_starts()
 
     def reset(self):

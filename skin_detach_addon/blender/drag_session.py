@@ -11,6 +11,7 @@ import math
 from mathutils import Matrix, Vector
 
 from .deformation import DRAG_TOL, Deformation
+from .skin_rig import PREVIEW_ABOVE
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
 _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
@@ -57,11 +58,18 @@ class DragSession:
     the mouse is ignored while a number is typed. LMB/Enter confirms, RMB/Esc restores the
     empties, the mesh and the proxy exactly as they were. A session ends with one of them:
     only the confirm records the written positions (moves skip that per-move checksum).
+
+    A mesh of more than ``preview_above`` vertices (None: never) that has a preview object shows
+    the preview while the mouse moves and the mesh itself is left alone; the confirm hides the
+    preview and writes the full detail from a settled solve, the cancel hides it.
     """
 
-    def __init__(self, obj, empty, view, mouse, preserve_volume=True):
+    def __init__(self, obj, empty, view, mouse, preserve_volume=True, preview_above=PREVIEW_ABOVE):
         self.obj, self.empty, self.view = obj, empty, view
         self.deformation = Deformation(obj, preserve_volume)
+        n = self.deformation.binding.surface.n_detail
+        self.previewing = (preview_above is not None and n > preview_above
+                           and self.deformation.preview is not None)
         self._saved = self.deformation.snapshot()
         self.start = empty.matrix_world.copy()
         self.pivot = self.start.to_translation()
@@ -77,6 +85,10 @@ class DragSession:
     def header(self):
         axis = f" along {self.axis}" if self.axis else ""
         timing = f"{self.step_ms[-1]:.1f} ms/step" if self.step_ms else "move the mouse"
+        if self.previewing:
+            binding = self.deformation.binding
+            timing = (f"preview of {binding.preview.points.shape[0]:,} of {binding.surface.n_detail:,} vertices "
+                      f"(full detail on confirm), {timing}")
         if self.typed:
             unit = {"MOVE": "", "ROTATE": " deg", "SCALE": "x"}[self.mode]
             timing = f"{self.typed}{unit} typed, {timing}"
@@ -170,7 +182,10 @@ class DragSession:
 
     def _place(self, matrix):
         self.empty.matrix_world = matrix
-        self.last = self.deformation.step(tol=DRAG_TOL, mark=False)  # confirm marks (or cancel restores)
+        if self.previewing:
+            self.last = self.deformation.preview_step(DRAG_TOL)
+        else:
+            self.last = self.deformation.step(tol=DRAG_TOL, mark=False)  # confirm marks (or cancel restores)
         self.step_ms.append(self.last.milliseconds)
 
     def confirm(self):

@@ -13,6 +13,13 @@ from . import handles, mesh_io
 
 RIG_COLLECTION = "Skin Detach"
 PROXY_TAG = stored.PROXY_TAG
+PREVIEW_TAG = stored.PREVIEW_TAG
+#: Meshes with more vertices than this get a preview by default (see :func:`build`): above it, a
+#: drag move writing every vertex (solve + rebuild + write + Blender's update) no longer fits in
+#: 33 ms on the 2-core reference machine (README, "Millions of vertices").
+PREVIEW_ABOVE = 400_000
+#: Vertices of the preview (clusters of the detail mesh).
+PREVIEW_VERTICES = 100_000
 
 
 def check_mesh_object(obj):
@@ -21,9 +28,9 @@ def check_mesh_object(obj):
         raise SkinDetachError("object: expected an active mesh object, got nothing active")
     if obj.type != 'MESH':
         raise SkinDetachError(f"object {obj.name!r}: expected a mesh object, got type {obj.type}")
-    if PROXY_TAG in obj:
-        raise SkinDetachError(f"object {obj.name!r}: expected a detail mesh, got a Skin Detach proxy; "
-                              f"select the original mesh")
+    if PROXY_TAG in obj or PREVIEW_TAG in obj:
+        raise SkinDetachError(f"object {obj.name!r}: expected a detail mesh, got a Skin Detach "
+                              f"{'proxy' if PROXY_TAG in obj else 'preview'}; select the original mesh")
     stored.check_editable(obj)
     if len(obj.data.vertices) == 0 or len(obj.data.polygons) == 0:
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected vertices and faces, got "
@@ -36,13 +43,17 @@ def mesh_of(obj):
         return None
     if handles.is_handle(obj):
         return handles.owner(obj)
-    if PROXY_TAG in obj:
-        return obj[PROXY_TAG]
+    for tag in (PROXY_TAG, PREVIEW_TAG):
+        if tag in obj:
+            return obj[tag]
     return obj
 
 
-def build(obj, target_faces=1000, normal_test=True, progress=None):
+def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, progress=None):
     """Bind ``obj`` (Object Mode) and make its proxy object; returns the core build stats.
+    A mesh of more than ``preview_above`` vertices (None: never) also gets a hidden preview
+    object, about :data:`PREVIEW_VERTICES` vertices (a quarter of the mesh at most) bound to the same proxy, which drags show
+    instead of the detail (and the build simplifies through it: much faster at millions).
     A previous binding is replaced: its proxy goes, handles made from detail vertices are
     carried over to the new proxy (back at rest), handles made from proxy vertices are removed."""
     check_mesh_object(obj)
@@ -50,8 +61,12 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     positions = mesh_io.read_positions(mesh)
     mesh_io.check_positions(f"mesh {mesh.name!r}", positions)
     triangles = mesh_io.read_triangles(mesh)
+    preview_vertices = None
+    if preview_above is not None and positions.shape[0] > preview_above:
+        preview_vertices = min(PREVIEW_VERTICES, positions.shape[0] // 4)
     surface = SkinDetachedSurface.build(positions.astype(np.float64), triangles, target_faces=target_faces,
-                                        normal_test=normal_test, progress=progress)
+                                        normal_test=normal_test, preview_vertices=preview_vertices,
+                                        progress=progress)
     old = []  # (empty, its detail ids or None): read before anything changes
     for empty in handles.handles_of(obj):
         try:
@@ -60,7 +75,8 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
             old.append((empty, None))  # damaged: removed below
     _remove_proxy(obj)
     proxy = _make_proxy(obj, surface)
-    stored.store(obj, surface, positions, proxy)
+    preview = None if surface.preview is None else _make_preview(obj, surface.preview)
+    stored.store(obj, surface, positions, proxy, preview)
     kept = removed = 0
     for empty, detail in old:
         if detail is not None and detail.size:
@@ -75,10 +91,10 @@ def build(obj, target_faces=1000, normal_test=True, progress=None):
     return stats
 
 
-def _make_proxy(obj, surface):
+def _new_mesh_object(name, points, faces, owner, tag):
+    """A mesh object ``name`` of (m, 3) ``points`` and (k, 3) ``faces`` in the rig collection,
+    parented to ``owner`` with identity transforms and tagged as belonging to it."""
     import bpy
-    points, faces = surface.proxy_vertices, surface.proxy_faces
-    name = f"{obj.name}_proxy"
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(points.shape[0])
     mesh.loops.add(faces.size)
@@ -87,16 +103,32 @@ def _make_proxy(obj, surface):
     mesh.loops.foreach_set("vertex_index", faces.astype(np.int32).ravel())
     mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
     mesh.update()
-    proxy = bpy.data.objects.new(name, mesh)
-    scene_collection(RIG_COLLECTION).objects.link(proxy)
-    proxy.parent = obj
-    proxy.matrix_parent_inverse = Matrix.Identity(4)
-    proxy.matrix_basis = Matrix.Identity(4)
+    made = bpy.data.objects.new(name, mesh)
+    scene_collection(RIG_COLLECTION).objects.link(made)
+    made.parent = owner
+    made.matrix_parent_inverse = Matrix.Identity(4)
+    made.matrix_basis = Matrix.Identity(4)
+    made.hide_render = True
+    made[tag] = owner
+    return made
+
+
+def _make_proxy(obj, surface):
+    proxy = _new_mesh_object(f"{obj.name}_proxy", surface.proxy_vertices, surface.proxy_faces, obj, PROXY_TAG)
     proxy.display_type = 'WIRE'
     proxy.show_in_front = True
-    proxy.hide_render = True
-    proxy[PROXY_TAG] = obj
     return proxy
+
+
+def _make_preview(obj, preview):
+    """The preview object: hidden in viewports except while a drag shows it; the mesh's first
+    material, so it looks like the mesh it stands for."""
+    made = _new_mesh_object(f"{obj.name}_preview", preview.points, preview.triangles, obj, PREVIEW_TAG)
+    if obj.data.materials and obj.data.materials[0] is not None:
+        made.data.materials.append(obj.data.materials[0])
+    made.hide_viewport = True
+    made.hide_select = True
+    return made
 
 
 def scene_collection(name):
@@ -112,10 +144,11 @@ def scene_collection(name):
 
 
 def _remove_proxy(obj):
-    """Remove every proxy object made for ``obj`` (its current one and any left from a lost binding)."""
+    """Remove every proxy and preview object made for ``obj`` (its current ones and any left from a
+    lost binding)."""
     import bpy
-    for proxy in [o for o in bpy.data.objects if o.get(PROXY_TAG) == obj]:
-        remove_with_mesh(proxy)
+    for made in [o for o in bpy.data.objects if o.get(PROXY_TAG) == obj or o.get(PREVIEW_TAG) == obj]:
+        remove_with_mesh(made)
 
 
 def remove_with_mesh(obj):

@@ -92,6 +92,21 @@ def unique_edges(triangles):
     return np.unique(edges, axis=0, return_counts=True)
 
 
+def first_of_each_triple(triangles):
+    """(q,) sorted indices of the first row of ``triangles`` (f, 3) with each unordered vertex triple
+    (repeated faces in any order or orientation are dropped). Sorting pairs of int64 keys keeps it
+    linear in memory and fast for any vertex count."""
+    if triangles.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    s = np.sort(triangles, axis=1)
+    n = int(s.max()) + 1
+    order = np.lexsort((s[:, 2], s[:, 0] * n + s[:, 1]))
+    ordered = s[order]
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    return np.sort(order[first])
+
+
 def barycentric_from_dots(uu, uv, vv, wu, wv, valid=None):
     """(r, 3) barycentric weights of drop points in triangles (P1, P2, P3) from dot products only
     (paper eq. 5): with u = P2 - P1, v = P3 - P1 and w = point - P1, every argument (r,) is the

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import bbox_diagonal, component_labels, face_cross, vertex_normals
+from .geometry import bbox_diagonal, component_labels, face_cross, first_of_each_triple, vertex_normals
 
 #: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal.
 DEGENERATE_AREA = 1e-14
@@ -76,19 +76,9 @@ def prepare_mesh(points, triangles):
     cross = face_cross(unique_points, faces)
     area2 = np.einsum("ij,ij->i", cross, cross)
     keep = distinct & (area2 > (DEGENERATE_AREA * max(diagonal, 1e-300) ** 2) ** 2)
-    kept = faces[keep]
+    kept = faces if keep.all() else faces[keep]
     # Drop repeated faces (same three vertices in any order): they make non-manifold fans of two.
-    if kept.shape[0]:
-        s = np.sort(kept, axis=1)
-        u = unique_points.shape[0]
-        key = (s[:, 0] * u + s[:, 1]) * u + s[:, 2] if u < 2_000_000 else None
-        if key is not None:
-            _, first = np.unique(key, return_index=True)
-        else:
-            _, first = np.unique(s, axis=0, return_index=True)
-        first = np.flatnonzero(keep)[np.sort(first)]
-    else:
-        first = np.flatnonzero(keep)
+    first = np.flatnonzero(keep)[first_of_each_triple(kept)]
     if first.size == faces.shape[0]:
         kept, kept_cross = faces, cross
     else:

@@ -59,6 +59,19 @@ def collapse_roots(collapses, n_points):
         parent = grand
 
 
+def follow_nearest(carrier, triangles, points, proxy_points):
+    """``carrier`` (u,) made whole: a vertex that some face of ``triangles`` uses but whose survivor
+    lost all its faces (carrier -1 or out of range) follows the proxy vertex nearest to it;
+    vertices no face uses get -1."""
+    in_faces = np.zeros(points.shape[0], dtype=bool)
+    in_faces[triangles.ravel()] = True
+    lost = in_faces & ((carrier < 0) | (carrier >= proxy_points.shape[0]))
+    if lost.any():
+        carrier = carrier.copy()
+        carrier[lost] = cKDTree(proxy_points).query(points[lost])[1]
+    return np.where(in_faces, carrier, -1)
+
+
 def simplify_component(points, triangles, target):
     """Simplify one mesh to ``target`` faces: (points (m, 3), faces (k, 3), carrier (n,)).
 
@@ -83,41 +96,36 @@ def simplify_component(points, triangles, target):
         carrier = np.asarray(rank_map, dtype=np.int64)
     else:
         carrier = rank[root]
-    in_faces = np.zeros(n, dtype=bool)
-    in_faces[triangles.ravel()] = True
-    lost = in_faces & ((carrier < 0) | (carrier >= out_points.shape[0]))
-    if lost.any():
-        # A vertex whose survivor lost all its faces follows the nearest proxy vertex.
-        carrier[lost] = cKDTree(out_points).query(points[lost])[1]
-    carrier[~in_faces] = -1
+    carrier = follow_nearest(carrier, triangles, points, out_points)
     return out_points, out_faces, carrier
 
 
-def simplify(mesh, target_faces, oversample=1.0):
-    """Proxy of a :class:`PreparedMesh` with about ``target_faces * oversample`` faces.
+def simplify(points, triangles, components, target_faces, oversample=1.0):
+    """Proxy of a mesh with about ``target_faces * oversample`` faces: ``points`` (u, 3),
+    ``triangles`` (t, 3) (no degenerate or repeated faces), ``components`` (u,) labels.
 
     Each component gets ``oversample`` times its share of ``target_faces`` (never more faces
     than it has); components at or below their share are copied whole.
     """
-    face_comp = mesh.components[mesh.triangles[:, 0]]
+    face_comp = components[triangles[:, 0]]
     labels, counts, targets = component_targets(face_comp, target_faces)
     goals = np.minimum(counts, np.round(targets * oversample).astype(np.int64))
-    u = mesh.points.shape[0]
+    u = points.shape[0]
     carrier = np.full(u, -1, dtype=np.int64)
     parts = []
 
     whole = np.isin(face_comp, labels[goals >= counts])
     if whole.any():
-        ids, local = np.unique(mesh.triangles[whole], return_inverse=True)
-        parts.append((ids, mesh.points[ids], local.reshape(-1, 3), np.arange(ids.size)))
+        ids, local = np.unique(triangles[whole], return_inverse=True)
+        parts.append((ids, points[ids], local.reshape(-1, 3), np.arange(ids.size)))
     simplified = labels[goals < counts]
-    if simplified.size == 1 and not whole.any() and np.bincount(mesh.triangles.ravel(), minlength=u).all():
+    if simplified.size == 1 and not whole.any() and np.bincount(triangles.ravel(), minlength=u).all():
         # One component using every vertex (the usual scan or sculpt): no re-indexing needed.
-        parts.append((np.arange(u), *simplify_component(mesh.points, mesh.triangles, goals[goals < counts][0])))
+        parts.append((np.arange(u), *simplify_component(points, triangles, goals[goals < counts][0])))
     else:
         for label, goal in zip(simplified, goals[goals < counts]):
-            ids, local = np.unique(mesh.triangles[face_comp == label], return_inverse=True)
-            parts.append((ids, *simplify_component(mesh.points[ids], local.reshape(-1, 3), goal)))
+            ids, local = np.unique(triangles[face_comp == label], return_inverse=True)
+            parts.append((ids, *simplify_component(points[ids], local.reshape(-1, 3), goal)))
 
     offset = 0
     all_points, all_faces = [], []
@@ -126,10 +134,10 @@ def simplify(mesh, target_faces, oversample=1.0):
         all_points.append(out_points)
         all_faces.append(out_faces + offset)
         offset += out_points.shape[0]
-    points = np.ascontiguousarray(np.concatenate(all_points), dtype=np.float64)
-    triangles = np.ascontiguousarray(np.concatenate(all_faces), dtype=np.int64)
-    component = np.zeros(points.shape[0], dtype=np.int64)
+    proxy_points = np.ascontiguousarray(np.concatenate(all_points), dtype=np.float64)
+    proxy_triangles = np.ascontiguousarray(np.concatenate(all_faces), dtype=np.int64)
+    component = np.zeros(proxy_points.shape[0], dtype=np.int64)
     used = carrier >= 0
-    component[carrier[used]] = mesh.components[used]
-    return Simplified(points=points, triangles=triangles, carrier=carrier, component=component,
+    component[carrier[used]] = components[used]
+    return Simplified(points=proxy_points, triangles=proxy_triangles, carrier=carrier, component=component,
                       kept_whole=int((goals >= counts).sum()))

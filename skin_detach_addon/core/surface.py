@@ -8,14 +8,17 @@ import hashlib
 import json
 import time
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from .clustering import cluster_mesh
 from .errors import SkinDetachError
 from .geometry import flat_ranges
 from .checked_collapse import collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
-from .simplification import simplify
+from .simplification import follow_nearest, simplify
 from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement
 from .validation import as_points, as_target_faces, as_triangles, as_vertex_ids
 
@@ -38,6 +41,40 @@ def topology_fingerprint(n_vertices, triangles):
     return digest.hexdigest()
 
 
+@dataclass
+class Preview:
+    """The light stand-in of a large detail mesh, bound to the same proxy.
+
+    points     (c, 3) float64  rest positions (cluster representatives, see :mod:`.clustering`)
+    triangles  (q, 3) int64    faces
+    surface    :class:`SkinDetachedSurface` whose detail is this mesh
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    surface: "SkinDetachedSurface"
+
+    def to_arrays(self):
+        """Dict of plain arrays that :meth:`from_arrays` reads back."""
+        return dict(self.surface.to_arrays(), points=self.points, triangles=self.triangles)
+
+    @classmethod
+    def from_arrays(cls, arrays, source="arrays"):
+        """Check and read a dict written by :meth:`to_arrays` (see :meth:`SkinDetachedSurface.from_arrays`)."""
+        surface = SkinDetachedSurface.from_arrays(arrays, source)
+        try:
+            points = as_points(f"{source} points", np.asarray(arrays["points"], dtype=np.float64).reshape(-1, 3),
+                               surface.n_detail)
+            triangles = as_triangles(f"{source} triangles", np.asarray(arrays["triangles"]).reshape(-1, 3),
+                                     surface.n_detail)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SkinDetachError(f"{source}: expected the preview's points and triangles, got malformed data "
+                                  f"({type(exc).__name__}: {exc}); rebuild the skin") from None
+        if topology_fingerprint(points.shape[0], triangles) != surface.fingerprint:
+            raise SkinDetachError(f"{source}: expected preview triangles matching its skin, got others; rebuild the skin")
+        return cls(points, triangles, surface)
+
+
 class SkinDetachedSurface:
     """Detail mesh (n vertices) bound to a proxy (m vertices, k faces).
 
@@ -48,7 +85,10 @@ class SkinDetachedSurface:
     skin            :class:`Skin` over welded ids
     fingerprint     str, topology of the detail mesh it was built from
     stats           dict of counts, timings and normal-test figures
+    preview         :class:`Preview` or None (set by :meth:`build` with ``preview_vertices``)
     """
+
+    preview = None
 
     def __init__(self, proxy_vertices, proxy_faces, weld, carrier, skin, fingerprint, stats):
         self.proxy_vertices = proxy_vertices
@@ -67,10 +107,14 @@ class SkinDetachedSurface:
         return self.weld.shape[0]
 
     @classmethod
-    def build(cls, vertices, triangles, target_faces=1000, normal_test=True, progress=None):
+    def build(cls, vertices, triangles, target_faces=1000, normal_test=True, preview_vertices=None, progress=None):
         """Simplify, detach the skin and prepare the rebuild of a triangle mesh.
 
         ``vertices`` (n, 3) float, ``triangles`` (f, 3) int indices into ``vertices``.
+        ``preview_vertices``, if given and the mesh has more (welded) vertices, clusters the mesh
+        to about that many vertices first (:mod:`.clustering`): the library simplifies the
+        clustered mesh, which is much faster on millions of faces, and the clustered mesh, bound
+        to the same proxy, becomes :attr:`preview`. The detail's skin is bound as without it.
         ``progress``, if given, is called as ``progress(fraction, stage)`` before each stage.
         """
         report = progress if progress is not None else (lambda fraction, stage: None)
@@ -87,23 +131,45 @@ class SkinDetachedSurface:
             raise SkinDetachError(
                 f"triangles: expected at least one face of non-zero area, got {faces.shape[0]} degenerate faces")
         prepared = time.perf_counter()
-        report(0.1, "simplifying")
-
-        proxy = simplify(mesh, target, NORMAL_TEST_OVERSAMPLE if normal_test else 1.0)
+        clustered = None
+        if preview_vertices is not None and mesh.points.shape[0] > preview_vertices:
+            report(0.1, "clustering")
+            area = 0.5 * float(np.sqrt(np.einsum("ij,ij->i", mesh.cross, mesh.cross)).sum())
+            clustered = cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, area,
+                                     preview_vertices)
+        clustering = time.perf_counter()
+        report(0.2, "simplifying")
+        oversample = NORMAL_TEST_OVERSAMPLE if normal_test else 1.0
+        if clustered is None:
+            proxy = simplify(mesh.points, mesh.triangles, mesh.components, target, oversample)
+            carrier = proxy.carrier
+        else:
+            # The library simplifies the clustered mesh; detail vertex -> cluster -> proxy vertex.
+            proxy = simplify(clustered.points, clustered.triangles, clustered.components, target, oversample)
+            carrier = follow_nearest(proxy.carrier[clustered.cluster], mesh.triangles, mesh.points, proxy.points)
         simplified = time.perf_counter()
         report(0.5, "normal test")
         refused = 0
-        carrier = proxy.carrier
         proxy_points, proxy_faces = proxy.points, proxy.triangles
+        remap = np.arange(proxy_points.shape[0])
         if normal_test:
-            checked = collapse_with_normal_test(proxy.points, proxy.triangles, proxy.component, proxy.carrier,
-                                                mesh, target)
-            carrier = np.where(carrier >= 0, checked.remap[np.maximum(carrier, 0)], -1)
+            checked = collapse_with_normal_test(proxy.points, proxy.triangles, proxy.component, carrier, mesh, target)
+            remap = checked.remap
+            carrier = np.where(carrier >= 0, remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
         tested = time.perf_counter()
         report(0.7, "binding the skin")
 
         skin, ring_disagree = bind_skin(mesh.points, mesh.normals, carrier, proxy_points, proxy_faces)
+        preview = None
+        if clustered is not None:
+            preview_carrier = np.where(proxy.carrier >= 0, remap[np.maximum(proxy.carrier, 0)], -1)
+            preview_skin = bind_skin(clustered.points, clustered.normals, preview_carrier, proxy_points,
+                                     proxy_faces)[0]
+            c = clustered.points.shape[0]
+            preview = Preview(clustered.points, clustered.triangles,
+                              cls(proxy_points, proxy_faces, np.arange(c), preview_carrier, preview_skin,
+                                  topology_fingerprint(c, clustered.triangles), {"preview_of": int(points.shape[0])}))
         bound = time.perf_counter()
         with_normal = max(int(mesh.normals.any(axis=1).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
@@ -129,13 +195,16 @@ class SkinDetachedSurface:
             "normal_test_refused": int(refused),
             "normal_disagree_bound": float(bound_share),
             "normal_disagree_ring": float(ring_share),
+            "preview_vertices": 0 if preview is None else int(preview.points.shape[0]),
+            "preview_faces": 0 if preview is None else int(preview.triangles.shape[0]),
         }
         report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin,
                       topology_fingerprint(points.shape[0], faces), stats)
+        surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
-            "prepare": prepared - start, "simplify": simplified - prepared, "normal_test": tested - simplified,
+            "prepare": prepared - start, "cluster": clustering - prepared, "simplify": simplified - clustering, "normal_test": tested - simplified,
             "skin": bound - tested, "rebuild_setup": done - bound, "total": done - start,
         }
         report(1.0, "done")

@@ -4,8 +4,13 @@ frame change), re-solve without the user pressing anything.
 The depsgraph and frame-change handlers only notice (comparing handle transforms with those of
 the last solve) and schedule a timer; the timer does the write, outside the handler. A guard
 stops the write's own depsgraph update from scheduling another. Only scenes whose
-``skin_detach.live_update`` is on are watched; :func:`unregister` removes handlers and timer.
+``skin_detach.live_update`` is on are watched; :func:`unregister` removes handlers and timers.
+
+A mesh above the scene's Preview Above that has a preview shows the preview while its handles
+move; once they have been still for :data:`IDLE_SECONDS`, :func:`settle` writes the full detail.
 """
+
+import time
 
 import bpy
 from bpy.app.handlers import persistent
@@ -19,6 +24,10 @@ _state = {"busy": False}
 ERRORS = {}
 #: Handle signature of every object at its last solve, write or cancel (runtime only).
 _SOLVED = {}
+#: Seconds without a handle move before a previewed mesh gets its full detail.
+IDLE_SECONDS = 0.4
+#: Objects showing their preview: name -> time.monotonic() of the last preview step.
+_UNSETTLED = {}
 
 
 def handle_signature(obj, proxy):
@@ -70,7 +79,15 @@ def flush():
             if obj is None or not api.is_bound(obj):
                 continue
             try:
-                stats = api.deform(obj, scene.skin_detach.preserve_volume)
+                large = api.figures(obj)["build"].get("detail_vertices", 0) > scene.skin_detach.preview_above
+                stats = api.deform(obj, scene.skin_detach.preserve_volume, api.DRAG_TOL if large else api.SETTLE_TOL,
+                                   preview=large)
+                if stats["preview"]:
+                    _UNSETTLED[name] = time.monotonic()
+                    if not bpy.app.timers.is_registered(settle):
+                        bpy.app.timers.register(settle, first_interval=IDLE_SECONDS)
+                else:
+                    _UNSETTLED.pop(name, None)
                 if stats["converged"]:
                     ERRORS.pop(name, None)
                 else:
@@ -84,6 +101,29 @@ def flush():
     finally:
         _state["busy"] = False
     return None
+
+
+def settle(now=None):
+    """Write the full detail of every previewed object whose handles have been still for
+    :data:`IDLE_SECONDS` (the timer's body, repeating while any preview shows; ``now``: the
+    time.monotonic() to judge by, tests pass a later one)."""
+    now = time.monotonic() if now is None else now
+    for name in [n for n, last in _UNSETTLED.items() if now - last >= IDLE_SECONDS and n not in _pending]:
+        del _UNSETTLED[name]
+        obj = bpy.data.objects.get(name)
+        if obj is None or not api.is_bound(obj):
+            continue
+        _state["busy"] = True
+        try:
+            api.deform(obj, bpy.context.scene.skin_detach.preserve_volume)
+            ERRORS.pop(name, None)
+        except SkinDetachError as exc:
+            ERRORS[name] = str(exc)
+            print(f"Skin Detach live update: {exc}")
+        finally:
+            _state["busy"] = False
+        remember(obj)
+    return IDLE_SECONDS if _UNSETTLED else None
 
 
 def pending():
@@ -102,6 +142,8 @@ def unregister():
                                (bpy.app.handlers.frame_change_post, _on_frame_change)):
         while function in handlers:
             handlers.remove(function)
-    if bpy.app.timers.is_registered(flush):
-        bpy.app.timers.unregister(flush)
+    for timer in (flush, settle):
+        if bpy.app.timers.is_registered(timer):
+            bpy.app.timers.unregister(timer)
     _pending.clear()
+    _UNSETTLED.clear()

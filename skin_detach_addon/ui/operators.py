@@ -87,17 +87,18 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
         wm.progress_begin(0, 100)
         try:
-            stats = api.build(obj, self.target_faces, self.normal_test, progress)
+            stats = api.build(obj, self.target_faces, self.normal_test, progress, settings.preview_above)
         finally:
             wm.progress_end()
             if status is not None:
                 status.status_text_set(None)
         kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
         dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
+        preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
         self.report({'INFO'}, (
             f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
             f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
-            f"{stats['case3']:,}){kept}{dropped}"))
+            f"{stats['case3']:,}){preview}{kept}{dropped}"))
         return {'FINISHED'}
 
 
@@ -224,7 +225,8 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             self.session = api.DragSession(bound_owner(context), context.active_object,
                                        RegionView(context.region, context.region_data),
                                        (event.mouse_region_x, event.mouse_region_y),
-                                       context.scene.skin_detach.preserve_volume)
+                                       context.scene.skin_detach.preserve_volume,
+                                       context.scene.skin_detach.preview_above)
         except SkinDetachError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}

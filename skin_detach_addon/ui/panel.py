@@ -21,6 +21,7 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text="Build", icon='MOD_DECIM')
         box.prop(settings, "target_faces")
         box.prop(settings, "normal_test")
+        box.prop(settings, "preview_above")
         bound = api.is_bound(obj)
         box.operator("skin_detach.build", text="Rebuild" if bound else "Build", icon='FILE_REFRESH')
         if obj is None or obj.type != 'MESH':
@@ -82,6 +83,11 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
         if stats.get("target_reached") is False:
             box.label(text=f"  target {stats.get('target_faces', 0):,}: the normal test stopped above it", icon='INFO')
+        if stats.get("preview_vertices"):
+            note = "" if stats.get("detail_vertices", 0) > settings.preview_above else " (not used: below Preview Above)"
+            box.label(text=f"Preview: {stats['preview_vertices']:,} vertices{note}")
+        elif stats.get("detail_vertices", 0) > settings.preview_above:
+            box.label(text="No preview: Rebuild to make one", icon='INFO')
         box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")
         last = figures["last_step"]
         if last is None:
@@ -89,7 +95,8 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         else:
             volume = "" if last["volume_change"] != last["volume_change"] else \
                 f", volume {100 * last['volume_change']:+.2f} %"
-            box.label(text=f"Last step: {last['milliseconds']:.1f} ms, {last['iterations']} iterations{volume}")
+            shown = " (preview)" if last.get("preview") else ""
+            box.label(text=f"Last step{shown}: {last['milliseconds']:.1f} ms, {last['iterations']} iterations{volume}")
             if not last["converged"]:
                 box.label(text="The last solve did not converge", icon='ERROR')
 

@@ -2,6 +2,8 @@
 
 import bpy
 
+from .. import api
+
 
 def _toggle_live(self, context):
     from . import live_update
@@ -16,6 +18,10 @@ class SkinDetachSettings(bpy.types.PropertyGroup):
     normal_test: bpy.props.BoolProperty(
         name="Normal Test", default=True,
         description="Refuse proxy edge collapses that would turn proxy faces away from the detail they carry")
+    preview_above: bpy.props.IntProperty(
+        name="Preview Above", default=api.PREVIEW_ABOVE, min=0, soft_min=10_000, soft_max=10_000_000,
+        description="Meshes with more vertices get a light preview at Build (about 100,000 vertices), shown while "
+                    "a handle is dragged; the full detail is written on confirm")
     preserve_volume: bpy.props.BoolProperty(
         name="Preserve Volume", default=True,
         description="Keep the enclosed volume of closed proxies while deforming")
