@@ -1,0 +1,115 @@
+"""The geodesic clustering that pre-reduces large meshes and makes their drag preview."""
+
+import numpy as np
+import pytest
+
+from conftest import diagonal
+from shapes import box, closed_mouth, merge, plane, random_rotation
+from skin_detach_addon.core import SkinDetachedSurface
+from skin_detach_addon.core.clustering import cluster_mesh
+from skin_detach_addon.core.geometry import face_cross, unique_edges, unit_rows
+from skin_detach_addon.core.prepared_mesh import prepare_mesh
+from skin_detach_addon.core.surface import Preview
+
+
+def _clustered(points, tris, target):
+    mesh = prepare_mesh(points, tris)
+    area = 0.5 * np.sqrt(np.einsum("ij,ij->i", mesh.cross, mesh.cross)).sum()
+    return mesh, cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, area, target)
+
+
+@pytest.mark.parametrize("name", ["armadillo", "bunny"])
+def test_closed_meshes_give_a_closed_manifold_consistently_facing_coarse_mesh(bundled, name):
+    points, tris = bundled(name)
+    mesh, coarse = _clustered(points, tris, 3000)
+    assert 0.6 * 3000 <= coarse.points.shape[0] <= 1.6 * 3000
+    _, uses = unique_edges(mesh.triangles)
+    if (uses == 2).all():  # the detail is closed: so is the coarse mesh, with no fans
+        assert (unique_edges(coarse.triangles)[1] == 2).all()
+    # Each coarse face faces the way the detail normals of its three clusters do.
+    summed = np.stack([np.bincount(coarse.cluster, weights=mesh.normals[:, a], minlength=coarse.points.shape[0])
+                       for a in range(3)], axis=1)
+    facing = np.einsum("ij,ij->i", face_cross(coarse.points, coarse.triangles), summed[coarse.triangles].sum(axis=1))
+    assert (facing > 0).all()
+    # Representatives are detail vertices of their own clusters.
+    nearest = np.array([np.flatnonzero(coarse.cluster == c)[0] for c in range(0, coarse.points.shape[0], 97)])
+    assert np.array_equal(coarse.cluster[nearest], np.arange(0, coarse.points.shape[0], 97))
+    members = [np.flatnonzero(coarse.cluster == c) for c in range(0, coarse.points.shape[0], 97)]
+    for c, ids in zip(range(0, coarse.points.shape[0], 97), members):
+        assert np.any(np.all(mesh.points[ids] == coarse.points[c], axis=1))
+
+
+def test_clusters_keep_close_sheets_and_components_apart():
+    points, tris, lower, upper = closed_mouth()
+    mesh, coarse = _clustered(points, tris, 400)
+    away = mesh.points[:, 0] > 0.15  # beyond the hinge the jaws are 1 % of the length apart
+    for c in np.unique(coarse.cluster[away]):
+        members = coarse.cluster == c
+        assert not (members & lower & away).any() or not (members & upper & away).any()
+    two = merge(box(cells=(8, 8, 8)), box(cells=(8, 8, 8), offset=(1.001, 0.0, 0.0)))
+    mesh, coarse = _clustered(*two, 150)
+    for c in range(coarse.points.shape[0]):
+        assert np.unique(mesh.components[coarse.cluster == c]).size == 1
+    assert np.array_equal(np.unique(coarse.components), np.unique(mesh.components))
+
+
+def test_open_sheets_and_tiny_parts_survive():
+    sheet = plane(n=60)
+    tiny = (np.array([[3.0, 0, 0], [3.5, 0, 0], [3.0, 0.5, 0]]), np.array([[0, 1, 2]]))
+    points, tris = merge(sheet, tiny)
+    mesh, coarse = _clustered(points, tris, 400)
+    # The tiny triangle is too small to cluster: kept whole; the sheet keeps a border and no fans.
+    assert np.isin(np.unique(coarse.cluster[-3:]).size, 3)
+    edges, uses = unique_edges(coarse.triangles)
+    assert uses.max() == 2 and (uses == 1).any()
+
+
+def test_build_through_the_preview_keeps_the_skin_guarantees(bundled):
+    points, tris = bundled("armadillo")
+    diag = diagonal(points)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=500, preview_vertices=8000)
+    preview = sds.preview
+    assert preview is not None and 5000 <= preview.points.shape[0] <= 12000
+    assert sds.stats["preview_vertices"] == preview.points.shape[0]
+    assert (sds.carrier >= 0).all()
+    # Rest in = rest out for the detail and the preview, exactly; a rigid motion carries over.
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diag
+    assert np.abs(preview.surface.reconstruct(sds.proxy_vertices) - preview.points).max() <= 1e-9 * diag
+    rotation, shift = random_rotation(3), np.array([0.3, -2.0, 1.0]) * diag
+    moved = sds.proxy_vertices @ rotation.T + shift
+    assert np.abs(preview.surface.reconstruct(moved) - (preview.points @ rotation.T + shift)).max() <= 1e-9 * diag
+    assert np.abs(sds.reconstruct(moved) - (points @ rotation.T + shift)).max() <= 1e-9 * diag
+    # Small meshes are left as they are.
+    assert SkinDetachedSurface.build(*box(), target_faces=50, preview_vertices=10_000).preview is None
+
+
+def test_closed_mouth_does_not_tear_through_the_pre_reduction():
+    points, tris, lower, upper = closed_mouth()
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=600)
+    assert sds.preview is not None
+    carried = [np.flatnonzero(sds.carrier == v) for v in range(sds.proxy_vertices.shape[0])]
+    moved = sds.proxy_vertices.copy()
+    for v, detail in enumerate(carried):
+        if detail.size and points[detail, 1].mean() > 0.0:
+            moved[v, 1] += 0.2 * min(1.0, points[detail, 0].mean() / 0.1)
+    motion = np.linalg.norm(sds.reconstruct(moved) - points, axis=1)
+    away = points[:, 0] > 0.3
+    # A lip bound across the gap would follow the other jaw (a move of about the lift); the
+    # frames of long proxy faces reaching back to the bending hinge may turn it a little.
+    assert motion[lower & away].max() <= 0.1 * 0.2
+    assert motion[upper & away].min() >= 0.9 * 0.2
+
+
+def test_preview_arrays_round_trip_and_refuse_damage(bundled):
+    points, tris = bundled("bunny")
+    preview = SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=3000).preview
+    back = Preview.from_arrays(preview.to_arrays())
+    assert np.array_equal(back.points, preview.points) and np.array_equal(back.triangles, preview.triangles)
+    proxy = preview.surface.proxy_vertices * 1.5
+    assert np.array_equal(back.surface.reconstruct(proxy), preview.surface.reconstruct(proxy))
+    arrays = preview.to_arrays()
+    arrays["triangles"] = arrays["triangles"][::-1].copy()
+    with pytest.raises(Exception, match="preview triangles"):
+        Preview.from_arrays(arrays)
+    normals = unit_rows(face_cross(back.points, back.triangles))[0]
+    assert np.isfinite(normals).all()
