@@ -113,3 +113,14 @@ def test_preview_arrays_round_trip_and_refuse_damage(bundled):
         Preview.from_arrays(arrays)
     normals = unit_rows(face_cross(back.points, back.triangles))[0]
     assert np.isfinite(normals).all()
+
+
+def test_a_proxy_vertex_without_faces_never_leaves_detail_unbound():
+    from skin_detach_addon.core.skin import CASE_TWO, bind_skin
+    points, tris = box(cells=(4, 4, 4))
+    mesh = prepare_mesh(points, tris)
+    proxy_points = np.concatenate([mesh.points, [[0.5, 0.5, 0.5]]])  # one isolated proxy vertex
+    carrier = np.full(mesh.points.shape[0], proxy_points.shape[0] - 1)  # everything collapsed into it
+    skin, _ = bind_skin(mesh.points, mesh.normals, carrier, proxy_points, mesh.triangles)
+    assert np.array_equal(np.unique(skin.vertex), np.arange(mesh.points.shape[0]))
+    assert (skin.case == CASE_TWO).all()

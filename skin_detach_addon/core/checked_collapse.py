@@ -17,7 +17,6 @@ import heapq
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from .geometry import unit_rows
 from .simplification import MIN_COMPONENT_FACES, collapse_roots
@@ -80,19 +79,27 @@ def cluster_quadrics(detail_points, detail_triangles, detail_cross, carrier, n_p
     """(m, 10) area-weighted plane quadrics of the detail faces around each proxy vertex's cluster.
 
     ``detail_cross`` (t, 3) are the face cross products. Coefficients are a2 ab ac ad b2 bc bd
-    c2 cd d2 of the plane (a, b, c, d).
+    c2 cd d2 of the plane (a, b, c, d). A face counts once for every corner in the cluster.
+    Summed one coefficient at a time (bincounts over the corners), so no (t, 10) array is made.
     """
     normal, double_area = unit_rows(detail_cross)
-    d = -np.einsum("ij,ij->i", normal, detail_points[detail_triangles[:, 0]])
-    a, b, c = normal.T
-    coeffs = np.stack([a * a, a * b, a * c, a * d, b * b, b * c, b * d, c * c, c * d, d * d], axis=1)
-    coeffs *= 0.5 * double_area[:, None]
-    owner = carrier[detail_triangles]
-    face = np.broadcast_to(np.arange(detail_triangles.shape[0])[:, None], owner.shape)
-    ok = owner >= 0
-    gather = sp.csr_matrix((np.ones(int(ok.sum())), (owner[ok], face[ok])),
-                           shape=(n_proxy, detail_triangles.shape[0]))
-    return np.asarray(gather @ coeffs)
+    plane = [normal[:, 0], normal[:, 1], normal[:, 2], -np.einsum("ij,ij->i", normal, detail_points[detail_triangles[:, 0]])]
+    del normal
+    owners = []
+    for corner in range(3):
+        owner = carrier[detail_triangles[:, corner]]
+        keep = owner >= 0
+        owners.append((owner[keep], keep))
+    quadrics = np.zeros((n_proxy, 10))
+    column = 0
+    for i in range(4):
+        for j in range(i, 4):
+            weight = plane[i] * plane[j]
+            weight *= 0.5 * double_area
+            for owner, keep in owners:
+                quadrics[:, column] += np.bincount(owner, weights=weight[keep], minlength=n_proxy)
+            column += 1
+    return quadrics
 
 
 def _quadric_error(q, x, y, z):

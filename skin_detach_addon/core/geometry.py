@@ -94,17 +94,32 @@ def unique_edges(triangles):
 
 def first_of_each_triple(triangles):
     """(q,) sorted indices of the first row of ``triangles`` (f, 3) with each unordered vertex triple
-    (repeated faces in any order or orientation are dropped). Sorting pairs of int64 keys keeps it
-    linear in memory and fast for any vertex count."""
+    (repeated faces in any order or orientation are dropped). Rows are grouped by a 64-bit hash
+    (one sort) and only rows whose hash repeats are compared in full, so a collision never
+    drops a face."""
     if triangles.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    s = np.sort(triangles, axis=1)
-    n = int(s.max()) + 1
-    order = np.lexsort((s[:, 2], s[:, 0] * n + s[:, 1]))
-    ordered = s[order]
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
-    return np.sort(order[first])
+    s = np.sort(triangles, axis=1).astype(np.uint64)
+    hashed = (s[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (s[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))
+    hashed ^= s[:, 2] * np.uint64(0x165667B19E3779F9)
+    order = np.argsort(hashed)
+    ordered = hashed[order]
+    same = ordered[1:] == ordered[:-1]
+    if not same.any():
+        return np.arange(triangles.shape[0])
+    in_run = np.zeros(order.size, dtype=bool)
+    in_run[1:] |= same
+    in_run[:-1] |= same
+    candidates = np.sort(order[in_run])
+    rows = s[candidates].astype(np.int64)
+    n = int(rows.max()) + 1
+    exact = np.lexsort((rows[:, 2], rows[:, 0] * n + rows[:, 1]))
+    first = np.ones(exact.size, dtype=bool)
+    first[1:] = (rows[exact[1:]] != rows[exact[:-1]]).any(axis=1)
+    keep = np.ones(triangles.shape[0], dtype=bool)
+    keep[candidates] = False
+    keep[candidates[exact[first]]] = True
+    return np.flatnonzero(keep)
 
 
 def barycentric_from_dots(uu, uv, vv, wu, wv, valid=None):

@@ -12,15 +12,13 @@ face's own scaled normal (both are reproduced exactly). With rest-area weights t
 X = W [P'; V'] with W (n, m + 3k) fixed and sparse (row-block 3f + c of V' is corner c of face f).
 """
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import scipy.sparse as sp
 
 from .errors import SkinDetachError
-from .geometry import cotangent_weights, face_cross, unique_edges
+from .geometry import cotangent_weights, face_cross, flat_ranges, unique_edges
 from .rotations import WarmRotations
+from .threads import WORKERS, map_blocks
 
 
 def scaled_normals(points, triangles):
@@ -86,36 +84,37 @@ class VertexSimilarities:
 
 def rebuild_matrix(skin, proxy_triangles, n_proxy, weld):
     """(n, m + 3k) CSR matrix W of the rebuild; row i is detail vertex i (``weld`` (n,) maps it
-    to its welded row of ``skin``); column m + 3f + c is corner c of face f's frame vector."""
-    k = proxy_triangles.shape[0]
+    to its welded row of ``skin``); column m + 3f + c is corner c of face f's frame vector.
+    Built row by row from the associations (grouped by vertex already): six entries each, int32
+    column indices, no sort; two associations of a vertex sharing a proxy corner leave two
+    entries in that column, which every product sums."""
     u = skin.case.shape[0]
-    corners = proxy_triangles[skin.face]
-    rows = np.concatenate([np.repeat(skin.vertex, 3), np.repeat(skin.vertex, 3)])
-    cols = np.concatenate([corners.ravel(), (n_proxy + 3 * skin.face[:, None] + np.arange(3)).ravel()])
+    entries = np.empty((skin.vertex.shape[0], 6), dtype=np.int32)
+    entries[:, :3] = proxy_triangles[skin.face]
+    entries[:, 3:] = n_proxy + 3 * skin.face[:, None] + np.arange(3)
     blend = skin.bary * skin.weight[:, None]
-    data = np.concatenate([blend.ravel(), (blend * skin.height[:, None]).ravel()])
-    welded = sp.csr_matrix((data, (rows, cols)), shape=(u, n_proxy + 3 * k))
-    welded.sum_duplicates()
-    matrix = welded if weld.size == u and np.array_equal(weld, np.arange(u)) else welded[weld]
-    matrix = sp.csr_matrix(matrix)
-    matrix.sort_indices()
-    matrix.indptr = matrix.indptr.astype(np.int32)
-    matrix.indices = matrix.indices.astype(np.int32)
-    return matrix
+    data = np.empty((skin.vertex.shape[0], 6))
+    data[:, :3] = blend
+    data[:, 3:] = blend * skin.height[:, None]
+    indptr = np.zeros(u + 1, dtype=np.int64)
+    np.cumsum(6 * np.bincount(skin.vertex, minlength=u), out=indptr[1:])
+    indices, data = entries.ravel(), data.ravel()
+    if not (weld.size == u and np.array_equal(weld, np.arange(u))):
+        positions, _ = flat_ranges(indptr[weld], indptr[weld + 1])
+        indices, data = indices[positions], data[positions]
+        indptr = np.zeros(weld.size + 1, dtype=np.int64)
+        np.cumsum(6 * np.bincount(skin.vertex, minlength=u)[weld], out=indptr[1:])
+    shape = (weld.size, n_proxy + 3 * proxy_triangles.shape[0])
+    if data.size < 2**31 - 1:  # scipy keeps int32 indices only when the row pointer is int32 too
+        indptr = indptr.astype(np.int32)
+    else:
+        indices = indices.astype(np.int64)
+    return sp.csr_matrix((data, indices, indptr), shape=shape, copy=False)
 
 
 #: Row blocks rebuilt in parallel (scipy's sparse product releases the GIL) for meshes of at
 #: least PARALLEL_MIN_ROWS vertices.
-PARALLEL_BLOCKS = max(1, min(4, os.cpu_count() or 1))
 PARALLEL_MIN_ROWS = 100_000
-_POOL = None
-
-
-def _pool():
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=PARALLEL_BLOCKS, thread_name_prefix="skin_detach_rebuild")
-    return _POOL
 
 
 class Rebuild:
@@ -126,7 +125,7 @@ class Rebuild:
     and a float32 ``out`` (what Blender stores) runs the product in float32 (half the memory
     traffic; rounding at the level of float32 storage itself).
     One single-vector product per coordinate runs about a third faster than one three-column
-    product in scipy; large meshes split their rows over :data:`PARALLEL_BLOCKS` threads.
+    product in scipy; large meshes split their rows over :data:`~.threads.WORKERS` threads.
     """
 
     def __init__(self, matrix, proxy_vertices, proxy_triangles):
@@ -137,13 +136,24 @@ class Rebuild:
         self._rest_normals = scaled_normals(proxy_vertices, proxy_triangles)
         self._similarities = VertexSimilarities(proxy_vertices, proxy_triangles)
         self._stacked = np.empty((3, matrix.shape[1]))
-        blocks = PARALLEL_BLOCKS if self.n_detail >= PARALLEL_MIN_ROWS else 1
-        bounds = np.linspace(0, self.n_detail, blocks + 1).astype(int)
-        # Only the row blocks are kept (one block is the matrix itself), never the matrix twice;
-        # their float32 copies are made on first float32 use.
-        self._blocks = [(0, self.n_detail, matrix)] if blocks == 1 else \
-            [(a, b, matrix[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+        blocks = WORKERS if self.n_detail >= PARALLEL_MIN_ROWS else 1
+        self._bounds = np.linspace(0, self.n_detail, blocks + 1).astype(int)
+        # Row blocks are views of the matrix's arrays (never a copy); the float32 blocks share the
+        # column indices and add only a float32 copy of the values, made on first float32 use.
+        self._matrix = matrix
+        self._blocks = self._views(matrix.data)
         self._blocks32 = None
+
+    def _views(self, data):
+        """[(first row, end row, CSR over those rows)] sharing ``data`` (nnz,) and W's indices."""
+        indptr, indices, columns = self._matrix.indptr, self._matrix.indices, self._matrix.shape[1]
+        out = []
+        for a, b in zip(self._bounds[:-1], self._bounds[1:]):
+            lo, hi = indptr[a], indptr[b]
+            rows = sp.csr_matrix((data[lo:hi], indices[lo:hi], indptr[a:b + 1] - lo), shape=(b - a, columns),
+                                 copy=False)
+            out.append((a, b, rows))
+        return out
 
     def frame_vectors(self, points, groups=None):
         """(3k, 3) V': row 3f + c is face f's rest scaled normal under corner c's similarity
@@ -173,11 +183,7 @@ class Rebuild:
         blocks = self._blocks
         if out.dtype == np.float32:
             if self._blocks32 is None:
-                self._blocks32 = [(a, b, rows.astype(np.float32)) for a, b, rows in self._blocks]
+                self._blocks32 = self._views(self._matrix.data.astype(np.float32))
             blocks, stacked = self._blocks32, stacked.astype(np.float32)
-        if len(blocks) == 1:
-            self._rebuild_rows(blocks[0], stacked, out)
-        else:
-            for done in [_pool().submit(self._rebuild_rows, block, stacked, out) for block in blocks]:
-                done.result()
+        map_blocks(lambda block: self._rebuild_rows(block, stacked, out), blocks)
         return out

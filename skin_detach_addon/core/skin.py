@@ -25,13 +25,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .threads import map_blocks
 from .geometry import barycentric_from_dots, bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
 
 #: Barycentric tolerance for "the drop point lies in the triangle".
 CONTAIN_EPS = 1e-9
 #: Distance tolerance of the case-3 rule, relative to the proxy's bounding-box diagonal.
 DISTANCE_EPS = 1e-9
-#: Vertices handled per vectorised batch (bounds the memory of the build).
+#: Vertices handled per vectorised batch (bounds the memory of the build; batches run on the
+#: core's threads).
 CHUNK = 65536
 
 CASE_ONE, CASE_TWO, CASE_THREE, CASE_LOOSE = 1, 2, 3, 4
@@ -82,6 +84,9 @@ class ProxyFrames:
         self.valid = self.cross_len > 1e-12 * np.maximum(scale, 1e-300)
 
         self.ring = vertex_faces(triangles, m)
+        #: (m,) the vertex has a valid face around it (only those can carry case-2 vertices).
+        self.has_face = np.bincount(triangles[self.valid].ravel(), minlength=m) > 0
+        self._anchors = None
         incidence = sp.csr_matrix((np.ones(3 * k), (triangles.ravel(), np.repeat(np.arange(k), 3))), shape=(m, k))
         adjacency = ((incidence @ incidence.T) > 0).astype(np.int8).tocsr()
         adjacency.setdiag(1)
@@ -93,6 +98,14 @@ class ProxyFrames:
         around.eliminate_zeros()
         around.sort_indices()
         self.tier2 = (around.indptr.astype(np.int64), around.indices.astype(np.int64))
+
+    def nearest_with_face(self, points):
+        """(r,) the proxy vertex with a valid face nearest to each of ``points`` (r, 3)."""
+        if self._anchors is None:
+            ids = np.flatnonzero(self.has_face)
+            self._anchors = (ids, cKDTree(self.points[ids]))
+        ids, tree = self._anchors
+        return ids[tree.query(points)[1]]
 
     def project(self, points, faces):
         """Barycentrics (a, 3) and signed distances (a,) of ``points`` (a, 3) over ``faces`` (a,).
@@ -137,7 +150,7 @@ def _keep_nearest_planes(vertex, distance, n_vertices, tolerance):
 
 
 def _bind_chunk(frames, points, normals, carrier, chunk, ring_disagree):
-    """Associations of the welded vertices ``chunk`` (c,), all with a carrier >= 0.
+    """Associations of the welded vertices ``chunk`` (c,) (ascending), all with a carrier >= 0.
 
     Also marks in ``ring_disagree`` (u,) the vertices whose normal disagrees with a face
     around their carrier. Returns (association parts, case-2 vertices).
@@ -152,11 +165,12 @@ def _bind_chunk(frames, points, normals, carrier, chunk, ring_disagree):
         if table is frames.ring:
             ring_disagree[vertex[~agree]] = True
         vertex, face, bary, distance = vertex[ok], face[ok], bary[ok], distance[ok]
-        keep = _keep_nearest_planes(vertex, distance, points.shape[0], frames.tolerance)
+        local = np.searchsorted(chunk, vertex)  # chunk is sorted: (c,)-sized scratch, not (u,)
+        keep = _keep_nearest_planes(local, distance, chunk.size, frames.tolerance)
         out.append((vertex[keep], face[keep], bary[keep], distance[keep]))
-        found = np.zeros(points.shape[0], dtype=bool)
-        found[vertex] = True
-        pending = pending[~found[pending]]
+        found = np.zeros(chunk.size, dtype=bool)
+        found[local] = True
+        pending = pending[~found[np.searchsorted(chunk, pending)]]
     if pending.size:
         vertex, candidate = _pairs(frames.closed, carrier[pending], pending)
         out.append(_bind_around_nearest(frames, points, normals, vertex, candidate, True))
@@ -164,7 +178,15 @@ def _bind_chunk(frames, points, normals, carrier, chunk, ring_disagree):
 
 
 def _bind_around_nearest(frames, points, normals, vertex, candidate, filter_normals):
-    """Case 2: per vertex, the nearest of its ``candidate`` proxy vertices, then its faces."""
+    """Case 2: per vertex, the nearest of its ``candidate`` proxy vertices that have a valid face
+    (the nearest such proxy vertex anywhere when none has), then its faces."""
+    with_face = frames.has_face[candidate]
+    if not with_face.all():
+        everyone = np.unique(vertex)
+        vertex, candidate = vertex[with_face], candidate[with_face]
+        orphans = np.setdiff1d(everyone, vertex)
+        vertex = np.concatenate([vertex, orphans])
+        candidate = np.concatenate([candidate, frames.nearest_with_face(points[orphans])])
     gap = points[vertex] - frames.points[candidate]
     dist2 = np.einsum("ij,ij->i", gap, gap)
     order = np.lexsort((dist2, vertex))
@@ -175,9 +197,10 @@ def _bind_around_nearest(frames, points, normals, vertex, candidate, filter_norm
     usable = frames.valid[face]
     if filter_normals:
         agree = _agrees(frames, normals, v, face) & usable
-        any_agree = np.zeros(points.shape[0], dtype=bool)
-        any_agree[v[agree]] = True
-        usable = np.where(any_agree[v], agree, usable)
+        local = np.searchsorted(chosen_vertex, v)  # chosen_vertex is sorted and unique
+        any_agree = np.zeros(chosen_vertex.size, dtype=bool)
+        any_agree[local[agree]] = True
+        usable = np.where(any_agree[local], agree, usable)
     v, face = v[usable], face[usable]
     bary, distance = frames.project(points[v], face)
     return v, face, bary, distance
@@ -196,15 +219,15 @@ def bind_skin(points, normals, carrier, proxy_points, proxy_triangles):
     ring_disagree = np.zeros(u, dtype=bool)
     parts = []
     bound = np.flatnonzero(carrier >= 0)
-    for start in range(0, bound.size, CHUNK):
-        chunk_parts, case_two = _bind_chunk(frames, points, normals, carrier, bound[start:start + CHUNK],
-                                            ring_disagree)
+    chunks = [bound[start:start + CHUNK] for start in range(0, bound.size, CHUNK)]
+    for chunk_parts, case_two in map_blocks(
+            lambda chunk: _bind_chunk(frames, points, normals, carrier, chunk, ring_disagree), chunks):
         parts.extend(chunk_parts)
         case[case_two] = CASE_TWO
     loose = np.flatnonzero(carrier < 0)
     if loose.size:
-        nearest = cKDTree(proxy_points).query(points[loose])[1]
-        parts.append(_bind_around_nearest(frames, points, normals, loose, nearest.astype(np.int64), False))
+        parts.append(_bind_around_nearest(frames, points, normals, loose, frames.nearest_with_face(points[loose]),
+                                          False))
         case[loose] = CASE_LOOSE
 
     vertex = np.concatenate([p[0] for p in parts])

@@ -1,0 +1,24 @@
+"""The one thread pool of the core: numpy and scipy release the GIL inside their loops, so row
+blocks and vertex chunks run side by side on the machine's cores."""
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+#: Threads used (at most four: the work is memory-bound beyond that).
+WORKERS = max(1, min(4, os.cpu_count() or 1))
+_POOL = None
+
+
+def pool():
+    """The shared :class:`ThreadPoolExecutor` of :data:`WORKERS` threads (made on first use)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="skin_detach")
+    return _POOL
+
+
+def map_blocks(function, blocks):
+    """``[function(block) for block in blocks]``, run on the pool when there is more than one."""
+    if len(blocks) <= 1 or WORKERS == 1:
+        return [function(block) for block in blocks]
+    return [done.result() for done in [pool().submit(function, block) for block in blocks]]
