@@ -15,7 +15,7 @@ from skin_detach_addon.core.surface import Preview
 def _clustered(points, tris, target):
     mesh = prepare_mesh(points, tris)
     area = 0.5 * np.sqrt(np.einsum("ij,ij->i", mesh.cross, mesh.cross)).sum()
-    return mesh, cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, area, target)
+    return mesh, cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, mesh.graph, area, target)
 
 
 @pytest.mark.parametrize("name", ["armadillo", "bunny"])

@@ -7,7 +7,8 @@ histogram of their normals over :data:`CUBE_BINS` cube-map directions (merging t
 adds their histograms). A collapse is refused when one of the faces it reshapes would disagree
 (non-positive dot product) with more of the detail normals in its three corner clusters than
 the face did before, so no proxy face starts pointing away from detail surface it stands for. Quadrics come from the detail faces
-of each cluster, so placement follows the detail surface, not the intermediate proxy.
+of each cluster (or of its clustered copy, for millions of faces), so placement follows the detail surface, not the
+intermediate proxy.
 
 Arrays: proxy ``points`` (m, 3) and ``triangles`` (k, 3); ``carrier`` (u,) maps welded detail
 vertices to proxy vertices (-1: none); detail ``normals`` (u, 3) are unit or zero.
@@ -241,17 +242,20 @@ class _CollapseState:
         return "ok"
 
 
-def collapse_with_normal_test(points, triangles, component, carrier, detail, target_faces):
+def collapse_with_normal_test(points, triangles, component, carrier, detail, target_faces, quadrics=None):
     """Collapse edges of the proxy (cheapest quadric error first) down to ``target_faces``.
 
     Border vertices are never moved; collapses that break the link condition, flip a face,
     take a component under :data:`MIN_COMPONENT_FACES` faces or fail the normal test are
     refused. Stops early when no allowed collapse is left. ``detail`` is the
-    :class:`~.prepared_mesh.PreparedMesh` the proxy was simplified from.
+    :class:`~.prepared_mesh.PreparedMesh` the proxy was simplified from. ``quadrics`` (m, 10), if
+    given, replace the ones summed over the detail faces (see :func:`cluster_quadrics`): a build
+    through a clustered copy sums them over the copy's faces, which lie on the detail surface.
     """
     normals = detail.normals
     m = points.shape[0]
-    quadrics = cluster_quadrics(detail.points, detail.triangles, detail.cross, carrier, m)
+    if quadrics is None:
+        quadrics = cluster_quadrics(detail.points, detail.triangles, detail.cross, carrier, m)
     has_normal = (carrier >= 0) & normals.any(axis=1)
     keys = carrier[has_normal] * CUBE_BINS + cube_bin(normals[has_normal])
     histograms = np.bincount(keys, minlength=m * CUBE_BINS).reshape(m, CUBE_BINS).astype(np.float64)

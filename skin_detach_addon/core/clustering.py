@@ -8,7 +8,8 @@ while a handle is dragged.
 
 Clusters: one seed vertex per occupied cell of a uniform grid (cell size h chosen from the
 surface area so that about the target number of cells is occupied) and component; every vertex
-joins the seed nearest along mesh edges (one multi-source Dijkstra: geodesic Voronoi regions).
+joins the seed the fewest mesh edges away (one multi-source breadth-first search: Voronoi
+regions along the surface).
 Regions are connected and grow along the surface, so two sheets passing close by (two fingers
 touching, both sides of a thin plate) stay apart and clusters never cross components. Each cluster is represented by its seed (a real detail vertex, so the coarse
 mesh lies on the detail surface). Faces map to the clusters
@@ -25,14 +26,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import breadth_first_order
 
 from .geometry import face_cross, first_of_each_triple, vertex_normals
 
 #: A component is only clustered when it keeps at least this many faces afterwards.
 MIN_KEPT_FACES = 64
 #: Rounds of splitting faulty clusters back into their vertices.
-REPAIR_ROUNDS = 4
+REPAIR_ROUNDS = 10
 #: Occupied cells per unit of area / h**2 on a typical surface (measured on scans: 1.3-1.6).
 CELLS_PER_AREA = 1.3
 
@@ -57,56 +58,69 @@ class Clustered:
 
 def _seeds(points, components, size):
     """(s,) one vertex per occupied grid cell of edge ``size`` and component: the one nearest to
-    the cell's centre."""
+    the cell's centre (one sort of the cell key plus the squared distance, a fraction below one)."""
     scaled = (points - points.min(axis=0)) / size
     cells = np.floor(scaled).astype(np.int64)
     extent = cells.max(axis=0) + 1
     key = ((cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]) * (int(components.max()) + 1)
     key += components
-    off_centre = scaled - cells - 0.5
-    order = np.lexsort((np.einsum("ij,ij->i", off_centre, off_centre), key))
+    scaled -= cells
+    scaled -= 0.5
+    order = np.argsort(key + np.einsum("ij,ij->i", scaled, scaled) / 0.76)
     first = np.ones(order.size, dtype=bool)
     first[1:] = key[order[1:]] != key[order[:-1]]
     return order[first]
 
 
-def _edge_graph(points, triangles):
-    """(u, u) CSR graph of the mesh's half-edges weighted by their length (each edge in both
-    directions where two faces share it)."""
-    u = points.shape[0]
-    tail, head = triangles.ravel(), triangles[:, [1, 2, 0]].ravel()
-    gap = points[tail] - points[head]
-    weight = np.maximum(np.sqrt(np.einsum("ij,ij->i", gap, gap)), 1e-300)
-    return sp.coo_matrix((weight, (tail, head)), shape=(u, u)).tocsr()
-
-
-def _voronoi_labels(points, triangles, seeds):
-    """(u,) cluster of every vertex: the seed nearest along mesh edges; cluster j is seed j (a
-    vertex no seed reaches, which one seed per component rules out, would keep its own)."""
-    u = points.shape[0]
-    sources = dijkstra(_edge_graph(points, triangles), directed=False, indices=seeds, min_only=True,
-                       return_predecessors=True)[2]
+def _voronoi_labels(graph, seeds):
+    """(u,) cluster of every vertex: the seed fewest mesh edges away (a multi-source breadth-first
+    search: one extra node linked to every seed); cluster j is seed j. ``graph`` is the mesh's
+    half-edge graph. A vertex no seed reaches, which one seed per component rules out, keeps a
+    cluster of its own."""
+    u = graph.shape[0]
+    source = u
+    indptr = np.concatenate([graph.indptr, [graph.indptr[-1] + seeds.size]])
+    indices = np.concatenate([graph.indices, seeds.astype(graph.indices.dtype)])
+    linked = sp.csr_matrix((np.ones(indices.size, dtype=np.int8), indices, indptr), shape=(u + 1, u + 1))
+    parent = breadth_first_order(linked, source, directed=True, return_predecessors=True)[1]
+    root = np.where(parent >= 0, parent, -1)
+    root[seeds] = seeds
+    root[source] = -1
+    reached = root >= 0
+    # Climb the search tree by pointer jumping until every reached vertex sits on its seed.
+    while True:
+        up = np.where(reached, root[np.maximum(root, 0)], -1)
+        if np.array_equal(up, root):
+            break
+        root = up
+    root = root[:u]
     rank = np.full(u, -1, dtype=np.int64)
     rank[seeds] = np.arange(seeds.size)
-    label = np.where(sources >= 0, rank[np.maximum(sources, 0)], -1)
+    label = np.where(root >= 0, rank[np.maximum(root, 0)], -1)
     lost = np.flatnonzero(label < 0)
     label[lost] = seeds.size + np.arange(lost.size)
     return label, np.concatenate([seeds, lost])
 
 
-def _split(label, rep, split):
+def _split(label, rep, summed, normals, split):
     """Clusters flagged in ``split`` (c,) broken back into their vertices; returns the compacted
-    (label (u,), representatives)."""
+    (label (u,), representatives (c',), summed detail normals (c', 3))."""
     members = np.flatnonzero(split[label])
     keep = ~split
     new_id = np.cumsum(keep) - 1
     label = new_id[label]
     label[members] = int(keep.sum()) + np.arange(members.size)
-    return label, np.concatenate([rep[keep], members])
+    return label, np.concatenate([rep[keep], members]), np.concatenate([summed[keep], normals[members]])
 
 
-def _faults(label, rep, triangles, normals, points):
-    """Coarse faces of a labelling (representatives ``rep`` (c,)) and the clusters to split:
+def _summed_normals(label, normals, n_clusters):
+    """(c, 3) sum of the detail normals of each cluster."""
+    return np.stack([np.bincount(label, weights=normals[:, axis], minlength=n_clusters) for axis in range(3)], axis=1)
+
+
+def _faults(label, rep, triangles, summed, points):
+    """Coarse faces of a labelling (representatives ``rep`` (c,), summed detail normals ``summed``
+    (c, 3)) and the clusters to split:
     (faces (q, 3), spanning (d,) indices of the ``triangles`` with corners in three clusters,
     faulty (c,) bool). A cluster is faulty when it is on a coarse edge that does not have exactly
     two faces (a hole or a non-manifold fan), on a face repeated in the quotient, on a coarse face
@@ -125,9 +139,7 @@ def _faults(label, rep, triangles, normals, points):
     keys, uses = np.unique(pairs[:, 0] * n_clusters + pairs[:, 1], return_counts=True)
     odd = keys[uses != 2]
     bad.extend([odd // n_clusters, odd % n_clusters])
-    cluster_normal = np.stack([np.bincount(label, weights=normals[:, axis], minlength=n_clusters)
-                               for axis in range(3)], axis=1)
-    facing = np.einsum("ij,ij->i", face_cross(points[rep], faces), cluster_normal[faces].sum(axis=1))
+    facing = np.einsum("ij,ij->i", face_cross(points[rep], faces), summed[faces].sum(axis=1))
     bad.append(faces[facing <= 0.0].ravel())
     faulty = np.ones(n_clusters, dtype=bool)
     faulty[faces.ravel()] = False  # clusters without a face stay faulty
@@ -135,9 +147,9 @@ def _faults(label, rep, triangles, normals, points):
     return faces, spanning, faulty
 
 
-def cluster_mesh(points, triangles, normals, components, area, target_vertices):
-    """:class:`Clustered` copy of the mesh with about ``target_vertices`` clusters (``area``: its
-    surface area). The cell size is set from the area and corrected once from the count; then,
+def cluster_mesh(points, triangles, normals, components, graph, area, target_vertices):
+    """:class:`Clustered` copy of the mesh with about ``target_vertices`` clusters (``graph``: its
+    :func:`~.geometry.half_edge_graph`, ``area``: its surface area). The cell size is set from the area and corrected once from the count; then,
     up to :data:`REPAIR_ROUNDS` times, faulty clusters (see :func:`_faults`) are split back into
     their vertices, so the coarse mesh has the detail's topology (a closed detail gives a closed,
     manifold, consistently facing coarse mesh; what is left faulty after the rounds is only where
@@ -147,12 +159,13 @@ def cluster_mesh(points, triangles, normals, components, area, target_vertices):
     seeds = _seeds(points, components, size)
     if not 0.8 * target_vertices <= seeds.size <= 1.25 * target_vertices:
         seeds = _seeds(points, components, size * np.sqrt(seeds.size / max(target_vertices, 1)))
-    label, rep = _voronoi_labels(points, triangles, seeds)
+    label, rep = _voronoi_labels(graph, seeds)
+    summed = _summed_normals(label, normals, rep.size)
     # Only faces with corners in three clusters make coarse faces; after a split, those are the
     # ones that did before and the ones touching the split clusters' vertices.
     candidates = np.arange(triangles.shape[0])
     for repair in range(REPAIR_ROUNDS + 1):
-        faces, spanning, faulty = _faults(label, rep, triangles[candidates], normals, points)
+        faces, spanning, faulty = _faults(label, rep, triangles[candidates], summed, points)
         # Components that would almost vanish keep their own vertices too.
         kept = np.bincount(components[rep[faces[:, 0]]], minlength=int(components.max()) + 1)
         faulty |= kept[components[rep]] < MIN_KEPT_FACES
@@ -161,7 +174,7 @@ def cluster_mesh(points, triangles, normals, components, area, target_vertices):
             break
         touching = np.flatnonzero(split[label][triangles].any(axis=1))
         candidates = np.union1d(candidates[spanning], touching)
-        label, rep = _split(label, rep, split)
+        label, rep, summed = _split(label, rep, summed, normals, split)
     coarse = np.ascontiguousarray(points[rep])
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     return Clustered(points=coarse, triangles=faces, normals=vertex_normals(coarse, faces), cluster=label,

@@ -64,12 +64,19 @@ def vertex_faces(triangles, n_points):
     return indptr, (order // 3).astype(np.int64)
 
 
-def component_labels(triangles, n_points):
-    """(n,) connected-component label of every vertex (edge connectivity); loose vertices get their own."""
-    # Two edges per face connect its three corners; weak connectivity ignores their direction.
-    rows = np.concatenate([triangles[:, 0], triangles[:, 1]])
-    cols = np.concatenate([triangles[:, 1], triangles[:, 2]])
-    graph = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n_points, n_points))
+def half_edge_graph(triangles, n_points):
+    """(n, n) CSR graph with an entry (int8 one) for every directed edge (a, b) of a face: both
+    directions of an edge two faces share, one for a border edge."""
+    index = np.int32 if n_points < 2**31 - 1 else np.int64
+    tail, head = triangles.astype(index).ravel(), triangles[:, [1, 2, 0]].astype(index).ravel()
+    return sp.coo_matrix((np.ones(tail.size, dtype=np.int8), (tail, head)), shape=(n_points, n_points)).tocsr()
+
+
+def component_labels(triangles, n_points, graph=None):
+    """(n,) connected-component label of every vertex (edge connectivity); loose vertices get their
+    own. ``graph``, if given, is :func:`half_edge_graph` of the same mesh."""
+    if graph is None:
+        graph = half_edge_graph(triangles, n_points)
     return connected_components(graph, directed=True, connection="weak")[1]
 
 

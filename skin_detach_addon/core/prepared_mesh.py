@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import bbox_diagonal, component_labels, face_cross, first_of_each_triple, vertex_normals
+from .geometry import (bbox_diagonal, component_labels, face_cross, first_of_each_triple, half_edge_graph,
+                       vertex_normals)
 
 #: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal.
 DEGENERATE_AREA = 1e-14
@@ -25,6 +26,7 @@ class PreparedMesh:
     cross       (t, 3) float64   face cross products of ``triangles`` (twice the area along the normal)
     normals     (u, 3) float64   unit vertex normals (zero where no face of non-zero area)
     components  (u,) int64       connected-component label of every welded vertex
+    graph       (u, u) CSR       :func:`~.geometry.half_edge_graph` of ``triangles``
     diagonal    float            bounding-box diagonal of the input
     """
 
@@ -34,6 +36,7 @@ class PreparedMesh:
     cross: np.ndarray
     normals: np.ndarray
     components: np.ndarray
+    graph: object
     diagonal: float
     welded_vertices: int
     dropped_faces: int
@@ -49,6 +52,10 @@ def weld_map(points):
     keys = np.ascontiguousarray(points + 0.0).view(np.uint64)
     hashed = (keys[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (keys[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))
     hashed ^= keys[:, 2] * np.uint64(0x165667B19E3779F9)
+    order = np.argsort(hashed)
+    if not (hashed[order[1:]] == hashed[order[:-1]]).any():  # no two rows alike: nothing to weld
+        identity = np.arange(points.shape[0], dtype=np.int64)
+        return identity, identity
     order = np.argsort(hashed, kind="stable")
     sorted_keys = keys[order]
     new_group = np.ones(order.size, dtype=bool)
@@ -83,13 +90,16 @@ def prepare_mesh(points, triangles):
         kept, kept_cross = faces, cross
     else:
         kept, kept_cross = faces[first], cross[first]
+    kept = np.ascontiguousarray(kept)
+    graph = half_edge_graph(kept, unique_points.shape[0])
     return PreparedMesh(
         points=unique_points,
         weld=weld,
-        triangles=np.ascontiguousarray(kept),
+        triangles=kept,
         cross=kept_cross,
         normals=vertex_normals(unique_points, kept, kept_cross),
-        components=component_labels(kept, unique_points.shape[0]),
+        components=component_labels(kept, unique_points.shape[0], graph),
+        graph=graph,
         diagonal=diagonal,
         welded_vertices=int(points.shape[0] - unique_points.shape[0]),
         dropped_faces=int(triangles.shape[0] - kept.shape[0]),

@@ -14,8 +14,8 @@ import numpy as np
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
-from .geometry import flat_ranges
-from .checked_collapse import collapse_with_normal_test
+from .geometry import face_cross, flat_ranges
+from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
 from .simplification import follow_nearest, simplify
@@ -135,7 +135,7 @@ class SkinDetachedSurface:
         if preview_vertices is not None and mesh.points.shape[0] > preview_vertices:
             report(0.1, "clustering")
             area = 0.5 * float(np.sqrt(np.einsum("ij,ij->i", mesh.cross, mesh.cross)).sum())
-            clustered = cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, area,
+            clustered = cluster_mesh(mesh.points, mesh.triangles, mesh.normals, mesh.components, mesh.graph, area,
                                      preview_vertices)
         clustering = time.perf_counter()
         report(0.2, "simplifying")
@@ -153,7 +153,13 @@ class SkinDetachedSurface:
         proxy_points, proxy_faces = proxy.points, proxy.triangles
         remap = np.arange(proxy_points.shape[0])
         if normal_test:
-            checked = collapse_with_normal_test(proxy.points, proxy.triangles, proxy.component, carrier, mesh, target)
+            quadrics = None
+            if clustered is not None:
+                quadrics = cluster_quadrics(clustered.points, clustered.triangles,
+                                            face_cross(clustered.points, clustered.triangles), proxy.carrier,
+                                            proxy.points.shape[0])
+            checked = collapse_with_normal_test(proxy.points, proxy.triangles, proxy.component, carrier, mesh, target,
+                                                quadrics)
             remap = checked.remap
             carrier = np.where(carrier >= 0, remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused

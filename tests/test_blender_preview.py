@@ -1,0 +1,144 @@
+"""Headless bpy: the light preview that stands in for a large mesh while handles move."""
+
+import time
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import TopView, activate, rig  # noqa: E402
+from blender_support import import_spot  # noqa: E402
+
+from skin_detach_addon import api  # noqa: E402
+from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
+from skin_detach_addon.blender.drag_session import CANCELLED, FINISHED, DragSession  # noqa: E402
+from skin_detach_addon.ui import live_update  # noqa: E402
+
+#: spot has about 2,900 vertices: a low Preview Above gives it a preview of a quarter of them.
+LOW = 1000
+
+
+def _rigged(scene):
+    scene.skin_detach.preview_above = LOW
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    return obj, handle
+
+
+def _state(obj):
+    proxy = binding.proxy_of(obj)
+    return (mesh_io.snapshot(obj.data)[0], mesh_io.snapshot(proxy.data)[0],
+            [np.array(child.matrix_basis) for child in proxy.children], binding.written_digest(obj))
+
+
+def _diagonal(obj):
+    rest = api.rest_positions(obj)
+    return float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
+
+
+def test_build_makes_a_hidden_preview_only_above_the_threshold(scene):
+    obj, _ = _rigged(scene)
+    preview = binding.preview_of(obj)
+    n = len(obj.data.vertices)
+    assert preview is not None and preview.hide_viewport and preview.hide_render
+    assert 0.5 * n / 4 <= len(preview.data.vertices) <= 1.5 * n / 4
+    assert api.mesh_of(preview) is obj and api.figures(obj)["build"]["preview_vertices"] == len(preview.data.vertices)
+    api.build(preview, target_faces=300, preview_above=LOW)  # the preview stands for its mesh: rebinds it
+    assert binding.preview_of(obj) is not None and binding.preview_of(obj) != preview
+    assert len([o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]) == 1
+    api.build(obj, target_faces=300, preview_above=None)  # no preview: the old one goes
+    assert binding.preview_of(obj) is None
+    assert not [o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]
+    with pytest.raises(api.SkinDetachError, match="preview_above"):
+        api.build(obj, preview_above=-1)
+
+
+def test_preview_drag_leaves_the_mesh_alone_and_confirm_writes_the_settled_detail(scene):
+    obj, handle = _rigged(scene)
+    preview = binding.preview_of(obj)
+    before = mesh_io.read_positions(obj.data)
+    preview_rest = mesh_io.read_positions(preview.data)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    for k in range(1, 6):
+        session.event("MOUSEMOVE", "NOTHING", (100 + 4 * k, 100 - 2 * k))
+        assert np.array_equal(mesh_io.read_positions(obj.data), before)
+    assert np.abs(mesh_io.read_positions(preview.data) - preview_rest).max() > 0.05
+    assert not preview.hide_viewport and obj.hide_viewport
+    assert "preview of" in session.header and "full detail on confirm" in session.header
+    assert session.event("RET", "PRESS", (120, 90)) == FINISHED
+    assert preview.hide_viewport and not obj.hide_viewport
+    confirmed = mesh_io.read_positions(obj.data)
+    assert np.abs(confirmed - before).max() > 0.05
+    # The confirm is a settled solve of the final pose: a cold solve of it gives the same detail.
+    binding.open_binding(obj).forget_warm_starts()
+    api.deform(obj)
+    assert np.abs(mesh_io.read_positions(obj.data) - confirmed).max() <= 1e-5 * _diagonal(obj)
+
+
+def test_preview_cancel_restores_everything_bit_exact(scene):
+    obj, handle = _rigged(scene)
+    obj.hide_viewport = True  # hidden by the user before the drag: stays hidden
+    before = _state(obj)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    assert not binding.preview_of(obj).hide_viewport
+    assert session.event("ESC", "PRESS", (130, 80)) == CANCELLED
+    after = _state(obj)
+    assert np.array_equal(after[0], before[0]) and np.array_equal(after[1], before[1])
+    assert all(np.array_equal(x, y) for x, y in zip(after[2], before[2])) and after[3] == before[3]
+    assert obj.hide_viewport and binding.preview_of(obj).hide_viewport
+
+
+def test_below_the_threshold_or_without_a_preview_the_detail_follows_every_move(scene):
+    obj, handle = _rigged(scene)
+    before = mesh_io.read_positions(obj.data)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=10**7)
+    session.event("MOUSEMOVE", "NOTHING", (120, 90))
+    assert np.abs(mesh_io.read_positions(obj.data) - before).max() > 0.05
+    assert binding.preview_of(obj).hide_viewport and "preview" not in session.header
+    session.event("ESC", "PRESS", (120, 90))
+    skin_rig.remove_with_mesh(binding.preview_of(obj))  # the user deleted the preview
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (120, 90))
+    assert np.abs(mesh_io.read_positions(obj.data) - before).max() > 0.05
+    assert session.event("RET", "PRESS", (120, 90)) == FINISHED
+
+
+def test_live_update_shows_the_preview_then_writes_the_detail_when_idle(scene):
+    obj, handle = _rigged(scene)
+    before = mesh_io.read_positions(obj.data)
+    scene.skin_detach.live_update = True
+    handle.location.x += 0.2
+    bpy.context.view_layer.update()
+    live_update.notice(scene)
+    live_update.flush()
+    assert np.array_equal(mesh_io.read_positions(obj.data), before)
+    assert not binding.preview_of(obj).hide_viewport and obj.hide_viewport
+    assert live_update.settle(now=time.monotonic()) is not None  # not idle long enough yet: waits
+    assert live_update.settle(now=time.monotonic() + 10 * live_update.IDLE_SECONDS) is None
+    assert binding.preview_of(obj).hide_viewport and not obj.hide_viewport
+    settled = mesh_io.read_positions(obj.data)
+    assert np.abs(settled - before).max() > 0.05
+    scene.skin_detach.live_update = False
+    api.deform(obj)
+    assert np.abs(mesh_io.read_positions(obj.data) - settled).max() <= 1e-5 * _diagonal(obj)
+
+
+def test_preview_survives_save_and_reload_and_goes_with_clear(scene, tmp_path):
+    obj, handle = _rigged(scene)
+    path = tmp_path / "preview.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    binding._CACHE.clear()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects["spot"]
+    handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
+    before = mesh_io.read_positions(obj.data)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (120, 90))
+    assert session.previewing and np.array_equal(mesh_io.read_positions(obj.data), before)
+    session.event("RET", "PRESS", (120, 90))
+    activate(obj)
+    api.clear(obj)
+    assert not [o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]
