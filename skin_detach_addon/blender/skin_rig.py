@@ -19,7 +19,7 @@ PREVIEW_TAG = stored.PREVIEW_TAG
 #: 33 ms on the 2-core reference machine (README, "Millions of vertices").
 PREVIEW_ABOVE = 400_000
 #: Vertices of the preview (clusters of the detail mesh).
-PREVIEW_VERTICES = 100_000
+PREVIEW_VERTICES = 60_000
 
 
 def check_mesh_object(obj):

@@ -18,10 +18,18 @@ def cross_rows(a, b):
     return out
 
 
+#: Faces per block in :func:`face_cross` (bounds its scratch memory on millions of faces).
+FACE_BLOCK = 1 << 20
+
+
 def face_cross(points, triangles):
     """(f, 3) cross products (P1 - P0) x (P2 - P0): the face normal scaled by twice its area."""
-    p0 = points[triangles[:, 0]]
-    return cross_rows(points[triangles[:, 1]] - p0, points[triangles[:, 2]] - p0)
+    out = np.empty((triangles.shape[0], 3))
+    for start in range(0, triangles.shape[0], FACE_BLOCK):
+        block = triangles[start:start + FACE_BLOCK]
+        p0 = points[block[:, 0]]
+        out[start:start + FACE_BLOCK] = cross_rows(points[block[:, 1]] - p0, points[block[:, 2]] - p0)
+    return out
 
 
 def unit_rows(vectors, eps=0.0):

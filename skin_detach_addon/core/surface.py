@@ -130,6 +130,10 @@ class SkinDetachedSurface:
         if mesh.triangles.shape[0] == 0:
             raise SkinDetachError(
                 f"triangles: expected at least one face of non-zero area, got {faces.shape[0]} degenerate faces")
+        n_detail, n_faces = points.shape[0], faces.shape[0]
+        fingerprint = topology_fingerprint(n_detail, faces)
+        n_components = int(np.unique(mesh.components[mesh.triangles[:, 0]]).size)
+        del points, faces  # the prepared mesh holds what is still needed (often the same arrays)
         prepared = time.perf_counter()
         clustered = None
         if preview_vertices is not None and mesh.points.shape[0] > preview_vertices:
@@ -147,6 +151,7 @@ class SkinDetachedSurface:
             # The library simplifies the clustered mesh; detail vertex -> cluster -> proxy vertex.
             proxy = simplify(clustered.points, clustered.triangles, clustered.components, target, oversample)
             carrier = follow_nearest(proxy.carrier[clustered.cluster], mesh.triangles, mesh.points, proxy.points)
+            mesh.graph = mesh.cross = None  # the detail's quadrics come from the clustered copy: not needed
         simplified = time.perf_counter()
         report(0.5, "normal test")
         refused = 0
@@ -163,6 +168,7 @@ class SkinDetachedSurface:
             remap = checked.remap
             carrier = np.where(carrier >= 0, remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
+        mesh.graph = mesh.cross = mesh.triangles = None  # binding needs points and normals only
         tested = time.perf_counter()
         report(0.7, "binding the skin")
 
@@ -175,15 +181,15 @@ class SkinDetachedSurface:
             c = clustered.points.shape[0]
             preview = Preview(clustered.points, clustered.triangles,
                               cls(proxy_points, proxy_faces, np.arange(c), preview_carrier, preview_skin,
-                                  topology_fingerprint(c, clustered.triangles), {"preview_of": int(points.shape[0])}))
+                                  topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}))
         bound = time.perf_counter()
         with_normal = max(int(mesh.normals.any(axis=1).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
         ring_share = ring_disagree.sum() / with_normal
         counts = np.bincount(skin.case, minlength=5)
         stats = {
-            "detail_vertices": int(points.shape[0]),
-            "detail_faces": int(faces.shape[0]),
+            "detail_vertices": n_detail,
+            "detail_faces": n_faces,
             "proxy_vertices": int(proxy_points.shape[0]),
             "proxy_faces": int(proxy_faces.shape[0]),
             "target_faces": target,
@@ -195,7 +201,7 @@ class SkinDetachedSurface:
             "associations": int(skin.vertex.shape[0]),
             "welded_duplicates": mesh.welded_vertices,
             "dropped_faces": mesh.dropped_faces,
-            "components": int(np.unique(mesh.components[mesh.triangles[:, 0]]).size),
+            "components": n_components,
             "components_kept_whole": proxy.kept_whole,
             "normal_test": bool(normal_test),
             "normal_test_refused": int(refused),
@@ -205,8 +211,7 @@ class SkinDetachedSurface:
             "preview_faces": 0 if preview is None else int(preview.triangles.shape[0]),
         }
         report(0.9, "preparing the rebuild")
-        surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin,
-                      topology_fingerprint(points.shape[0], faces), stats)
+        surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
