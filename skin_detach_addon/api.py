@@ -60,7 +60,7 @@ def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above
     removed. ``progress(fraction, stage)`` is called as the build goes.
 
     A mesh of more than ``preview_above`` vertices (None: never) also gets a preview: a hidden
-    object of about 100,000 vertices bound to the same proxy, which :class:`DragSession` (and
+    object of about 60,000 vertices bound to the same proxy, which :class:`DragSession` (and
     :func:`deform` with ``preview=True``) shows in place of the mesh while handles move."""
     if preview_above is not None and (isinstance(preview_above, bool) or not isinstance(preview_above, (int, np.integer))
                                       or preview_above < 0):

@@ -20,7 +20,7 @@ class SkinDetachSettings(bpy.types.PropertyGroup):
         description="Refuse proxy edge collapses that would turn proxy faces away from the detail they carry")
     preview_above: bpy.props.IntProperty(
         name="Preview Above", default=api.PREVIEW_ABOVE, min=0, soft_min=10_000, soft_max=10_000_000,
-        description="Meshes with more vertices get a light preview at Build (about 100,000 vertices), shown while "
+        description="Meshes with more vertices get a light preview at Build (about 60,000 vertices), shown while "
                     "a handle is dragged; the full detail is written on confirm")
     preserve_volume: bpy.props.BoolProperty(
         name="Preserve Volume", default=True,
