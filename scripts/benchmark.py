@@ -3,6 +3,7 @@ the bend scenario, and scale, printed as Markdown tables.
 
     python scripts/benchmark.py [--parts table1,side,scale] [--table1 bunny,armadillo,bunny-418K]
                                 [--side 50K,300K] [--scale 1.2M,1.8M] [--large 800K,3.2M] [--steps 30]
+                                [--preview-above N]
                                 [--quick] [--json PATH]
 
 Every mesh runs in its own process (bpy module), so each peak memory figure is that run's own.
@@ -227,15 +228,19 @@ def scale_row(size, steps):
             "build_s_per_million": build / (points.shape[0] / 1e6), "step_ms_per_million": step / (points.shape[0] / 1e6)}
 
 
-def large_row(size, steps):
+def large_row(spec, steps):
     """The modal drag at scale, as DragSession drives it (fake top view): build seconds and the
     peak memory it adds (the Blender mesh itself not counted), median ms per mouse move (solve,
-    rebuild, write-back and Blender's depsgraph update), and the confirm's seconds."""
+    rebuild, write-back and Blender's depsgraph update), the confirm's seconds and the peak memory
+    the drag adds. ``spec`` is a size, or "size@N" to give meshes above N vertices a preview
+    (default: the add-on's Preview Above)."""
     import bpy
 
     from bench.scenario import bend_scenario
     from bench.views import TopView
     from skin_detach_addon import api
+    size, _, above = spec.partition("@")
+    preview_above = int(above) if above else api.PREVIEW_ABOVE
     points, triangles = subdivided("armadillo", SIZES[size])
     fresh_scene()
     obj = blender_mesh("armadillo", points, triangles)
@@ -243,13 +248,14 @@ def large_row(size, steps):
     bpy.context.view_layer.update()
     before = peak_mb()
     start = time.perf_counter()
-    api.build(obj, target_faces=1000)
+    stats = api.build(obj, target_faces=1000, preview_above=preview_above)
     build = time.perf_counter() - start
     build_peak = peak_mb() - before
     scenario = bend_scenario(points)
     api.add_anchor(obj, scenario.anchor_ids)
     handle = api.add_handle(obj, scenario.handle_ids)
-    session = api.DragSession(obj, handle, TopView(0.002), (0, 0))
+    after_build = peak_mb()
+    session = api.DragSession(obj, handle, TopView(0.002), (0, 0), preview_above=preview_above)
     times = []
     for k in range(1, steps + 1):
         start = time.perf_counter()
@@ -261,7 +267,9 @@ def large_row(size, steps):
     bpy.context.view_layer.update()
     confirm = time.perf_counter() - start
     return {"size": size, "vertices": int(points.shape[0]), "build_s": build, "build_peak_mb_added": build_peak,
-            "move_ms": median_ms(times), "confirm_s": confirm, "peak_mb": peak_mb()}
+            "preview_vertices": stats.get("preview_vertices", 0), "proxy_faces": stats["proxy_faces"],
+            "build_stages_s": stats["seconds"], "move_ms": median_ms(times), "confirm_s": confirm,
+            "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb()}
 
 
 def run_one(spec, steps):
@@ -339,12 +347,17 @@ def print_scale(rows):
 
 
 def print_large(rows):
-    print("\n## The modal drag at scale (DragSession + depsgraph update per mouse move, 1,000-face proxy)\n")
-    print("| vertices | build s | build adds MB to peak | move ms (median) | confirm s | peak MB |")
-    print("|---|---|---|---|---|---|")
+    print("\n## The modal drag at scale (DragSession + depsgraph update per mouse move, 1,000-face proxy target)\n")
+    print("| vertices | proxy faces | preview vertices | build s | build adds MB to peak | move ms (median) "
+          "| confirm s | drag adds MB to peak | peak MB |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['vertices']:,} | {r['build_s']:.2f} | {r['build_peak_mb_added']:.0f} | {r['move_ms']:.1f} "
-              f"| {r['confirm_s']:.2f} | {r['peak_mb']:.0f} |")
+        print(f"| {r['vertices']:,} | {r['proxy_faces']:,} | {r['preview_vertices']:,} | {r['build_s']:.2f} "
+              f"| {r['build_peak_mb_added']:.0f} | {r['move_ms']:.1f} | {r['confirm_s']:.2f} "
+              f"| {r['drag_peak_mb_added']:.0f} | {r['peak_mb']:.0f} |")
+    for r in rows:
+        stages = ", ".join(f"{k} {v:.1f}" for k, v in r["build_stages_s"].items())
+        print(f"\n{r['vertices']:,} vertices, core build stages (s): {stages}")
 
 
 def main():
@@ -355,6 +368,8 @@ def main():
     parser.add_argument("--side", default="50K,300K")
     parser.add_argument("--scale", default="1.2M,1.8M")
     parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--preview-above", type=int, help="large part: meshes above this many vertices get a "
+                        "preview (default: the add-on's Preview Above)")
     parser.add_argument("--quick", action="store_true", help="CI run: the 50K armadillo once per part, 5 steps")
     parser.add_argument("--json", help="also write every figure to this file")
     parser.add_argument("--one", help=argparse.SUPPRESS)
@@ -364,6 +379,7 @@ def main():
         return
     if args.quick:
         args.table1, args.side, args.scale, args.large, args.steps = "armadillo-50K", "50K", "50K", "50K", 5
+        args.preview_above = 10_000 if args.preview_above is None else args.preview_above  # the preview path too
     parts = [p for p in args.parts.split(",") if p]
     figures = {"machine": {"cores": os.cpu_count(), "python": sys.version.split()[0]}}
     for name in [n for n in args.table1.split(",") if n] if "table1" in parts else []:
@@ -379,7 +395,8 @@ def main():
         figures["scale"] = [in_subprocess(f"scale:{s}", args.steps) for s in args.scale.split(",") if s]
         print_scale(figures["scale"])
     if "large" in parts:
-        figures["large"] = [in_subprocess(f"large:{s}", args.steps) for s in args.large.split(",") if s]
+        above = "" if args.preview_above is None else f"@{args.preview_above}"
+        figures["large"] = [in_subprocess(f"large:{s}{above}", args.steps) for s in args.large.split(",") if s]
         print_large(figures["large"])
     if args.json:
         os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)

@@ -44,6 +44,7 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
         assert key in scale, key
     large = figures["large"][0]
     assert large["vertices"] == 49990 and large["move_ms"] > 0 and large["confirm_s"] > 0
+    assert large["preview_vertices"] > 0  # the quick run takes the preview path
     found = dict(numbers(figures))
     assert len(found) > 30
     bad = {path: value for path, value in found.items() if not math.isfinite(value)}

@@ -106,7 +106,7 @@ def _flat_props(arrays, prefix=""):
         elif value.dtype.kind in "iu":
             props[prefix + key] = value.astype(np.int32).ravel()
         else:
-            props[prefix + key] = value.astype(np.float64).ravel()
+            props[prefix + key] = np.asarray(value, dtype=np.float64).ravel()  # no copy when already float64
     return props
 
 

@@ -25,6 +25,11 @@ def read_positions(mesh):
 def read_triangles(mesh):
     """(t, 3) int32 loop triangles of ``mesh`` (Blender's own index type: half the memory of
     int64 on millions of faces; the core makes the int64 copy it works on and frees it)."""
+    if len(mesh.loops) == 3 * len(mesh.polygons):  # every face is a triangle (each has at least 3 corners)
+        out = np.empty(len(mesh.loops), dtype=np.int32)
+        if out.size:
+            mesh.attributes[".corner_vert"].data.foreach_get("value", out)
+        return out.reshape(-1, 3)
     mesh.calc_loop_triangles()
     out = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
     mesh.loop_triangles.foreach_get("vertices", out)

@@ -234,6 +234,7 @@ def bind_skin(points, normals, carrier, proxy_points, proxy_triangles):
     face = np.concatenate([p[1] for p in parts])
     bary = np.concatenate([p[2] for p in parts])
     distance = np.concatenate([p[3] for p in parts])
+    del parts  # the chunks' arrays: as large as the skin itself
     order = np.argsort(vertex, kind="stable")
     vertex, face, bary, distance = vertex[order], face[order], bary[order], distance[order]
 
