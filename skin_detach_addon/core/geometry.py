@@ -8,6 +8,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from .threads import map_blocks
+
 
 def cross_rows(a, b):
     """(r, 3) row-wise cross products of (r, 3) arrays (np.cross is slow on many rows)."""
@@ -23,12 +25,16 @@ FACE_BLOCK = 1 << 20
 
 
 def face_cross(points, triangles):
-    """(f, 3) cross products (P1 - P0) x (P2 - P0): the face normal scaled by twice its area."""
+    """(f, 3) cross products (P1 - P0) x (P2 - P0): the face normal scaled by twice its area.
+    Blocks of :data:`FACE_BLOCK` faces run on the core's threads (the gathers dominate)."""
     out = np.empty((triangles.shape[0], 3))
-    for start in range(0, triangles.shape[0], FACE_BLOCK):
-        block = triangles[start:start + FACE_BLOCK]
-        p0 = points[block[:, 0]]
-        out[start:start + FACE_BLOCK] = cross_rows(points[block[:, 1]] - p0, points[block[:, 2]] - p0)
+
+    def block(start):
+        rows = triangles[start:start + FACE_BLOCK]
+        p0 = points[rows[:, 0]]
+        out[start:start + FACE_BLOCK] = cross_rows(points[rows[:, 1]] - p0, points[rows[:, 2]] - p0)
+
+    map_blocks(block, list(range(0, triangles.shape[0], FACE_BLOCK)))
     return out
 
 
@@ -50,10 +56,13 @@ def vertex_normals(points, triangles, cross=None):
         cross = face_cross(points, triangles)
     n = points.shape[0]
     acc = np.zeros((n, 3))
-    for corner in range(3):
-        ids = triangles[:, corner]
-        for axis in range(3):
-            acc[:, axis] += np.bincount(ids, weights=cross[:, axis], minlength=n)
+
+    def axis_sum(axis):  # bincounts run side by side on the core's threads
+        weights = np.ascontiguousarray(cross[:, axis])
+        for corner in range(3):
+            acc[:, axis] += np.bincount(triangles[:, corner], weights=weights, minlength=n)
+
+    map_blocks(axis_sum, [0, 1, 2])
     return unit_rows(acc)[0]
 
 
@@ -114,9 +123,15 @@ def first_of_each_triple(triangles):
     drops a face."""
     if triangles.shape[0] == 0:
         return np.zeros(0, dtype=np.int64)
-    s = np.sort(triangles, axis=1).astype(np.uint64)
-    hashed = (s[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (s[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F))
-    hashed ^= s[:, 2] * np.uint64(0x165667B19E3779F9)
+    # A symmetric hash (the same for any order of the three ids: no per-row sort of millions of
+    # rows): the sum of a non-linear 64-bit mix of each id.
+    hashed = np.zeros(triangles.shape[0], dtype=np.uint64)
+    for k in range(3):
+        mixed = triangles[:, k].astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        mixed ^= mixed >> np.uint64(31)
+        mixed *= np.uint64(0xBF58476D1CE4E5B9)
+        mixed ^= mixed >> np.uint64(29)
+        hashed += mixed
     order = np.argsort(hashed)
     ordered = hashed[order]
     same = ordered[1:] == ordered[:-1]
@@ -126,7 +141,7 @@ def first_of_each_triple(triangles):
     in_run[1:] |= same
     in_run[:-1] |= same
     candidates = np.sort(order[in_run])
-    rows = s[candidates].astype(np.int64)
+    rows = np.sort(triangles[candidates], axis=1).astype(np.int64)
     n = int(rows.max()) + 1
     exact = np.lexsort((rows[:, 2], rows[:, 0] * n + rows[:, 1]))
     first = np.ones(exact.size, dtype=bool)
