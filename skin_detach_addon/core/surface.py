@@ -132,7 +132,7 @@ class SkinDetachedSurface:
                 f"triangles: expected at least one face of non-zero area, got {faces.shape[0]} degenerate faces")
         n_detail, n_faces = points.shape[0], faces.shape[0]
         fingerprint = topology_fingerprint(n_detail, faces)
-        n_components = int(np.unique(mesh.components[mesh.triangles[:, 0]]).size)
+        n_components = int(np.count_nonzero(np.bincount(mesh.components[mesh.triangles[:, 0]])))
         del points, faces  # the prepared mesh holds what is still needed (often the same arrays)
         prepared = time.perf_counter()
         clustered = None
