@@ -33,7 +33,8 @@ def test_api_rest_in_rest_out_and_translation_follows_the_handle(scene):
     obj, handle = scripted_rig()
     rest = mesh_io.read_positions(obj.data).copy()
     stats = api.deform(obj)
-    assert stats["converged"] and set(stats) == {"milliseconds", "iterations", "converged", "volume_change"}
+    assert stats["converged"] and set(stats) == {"milliseconds", "iterations", "converged", "volume_change", "preview"}
+    assert stats["preview"] is False
     assert np.abs(mesh_io.read_positions(obj.data) - rest).max() < 1e-5
     handle.location.x += 0.3
     api.deform(handle)  # a handle means its mesh
