@@ -63,7 +63,7 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     triangles = mesh_io.read_triangles(mesh)
     preview_vertices = None
     if preview_above is not None and positions.shape[0] > preview_above:
-        preview_vertices = min(PREVIEW_VERTICES, positions.shape[0] // 4)
+        preview_vertices = min(PREVIEW_VERTICES, positions.shape[0] // 8)
     surface = SkinDetachedSurface.build(positions.astype(np.float64), triangles, target_faces=target_faces,
                                         normal_test=normal_test, preview_vertices=preview_vertices,
                                         progress=progress)

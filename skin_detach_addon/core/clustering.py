@@ -8,8 +8,8 @@ while a handle is dragged.
 
 Clusters: one seed vertex per occupied cell of a uniform grid (cell size h chosen from the
 surface area so that about the target number of cells is occupied) and component; every vertex
-joins the seed the fewest mesh edges away (one multi-source breadth-first search: Voronoi
-regions along the surface).
+joins the seed nearest along mesh edges (one multi-source Dijkstra: Voronoi regions along the
+surface).
 Regions are connected and grow along the surface, so two sheets passing close by (two fingers
 touching, both sides of a thin plate) stay apart and clusters never cross components. Each cluster is represented by its seed (a real detail vertex, so the coarse
 mesh lies on the detail surface). Faces map to the clusters
@@ -26,9 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
+from scipy.sparse.csgraph import dijkstra
 
 from .geometry import face_cross, first_of_each_triple, vertex_normals
+from .threads import map_blocks
 
 #: A component is only clustered when it keeps at least this many faces afterwards.
 MIN_KEPT_FACES = 64
@@ -72,31 +73,37 @@ def _seeds(points, components, size):
     return order[first]
 
 
-def _voronoi_labels(graph, seeds):
-    """(u,) cluster of every vertex: the seed fewest mesh edges away (a multi-source breadth-first
-    search: one extra node linked to every seed); cluster j is seed j. ``graph`` is the mesh's
-    half-edge graph. A vertex no seed reaches, which one seed per component rules out, keeps a
+#: Edges per block when measuring the graph's edge lengths on the core's threads.
+EDGE_BLOCK = 1 << 20
+
+
+def _edge_lengths(points, graph):
+    """``graph`` (u, u) CSR with its entries replaced by the lengths of the edges (same structure)."""
+    rows = np.repeat(np.arange(graph.shape[0], dtype=graph.indices.dtype), np.diff(graph.indptr))
+    lengths = np.empty(graph.indices.size)
+
+    def block(start):
+        stop = start + EDGE_BLOCK
+        gap = points[rows[start:stop]] - points[graph.indices[start:stop]]
+        lengths[start:stop] = np.sqrt(np.einsum("ij,ij->i", gap, gap))
+
+    map_blocks(block, list(range(0, lengths.size, EDGE_BLOCK)))
+    np.maximum(lengths, 1e-300, out=lengths)
+    return sp.csr_matrix((lengths, graph.indices, graph.indptr), shape=graph.shape, copy=False)
+
+
+def _voronoi_labels(points, graph, seeds):
+    """(u,) cluster of every vertex: the seed nearest along mesh edges (multi-source Dijkstra over
+    the half-edge ``graph`` weighted by edge length; lengths, not hop counts, so region borders
+    are not jagged by ties); cluster j is seed j. A vertex no seed reaches (one seed per
+    component rules it out; a border edge is only walked along its own direction) keeps a
     cluster of its own."""
     u = graph.shape[0]
-    source = u
-    indptr = np.concatenate([graph.indptr, [graph.indptr[-1] + seeds.size]])
-    indices = np.concatenate([graph.indices, seeds.astype(graph.indices.dtype)])
-    linked = sp.csr_matrix((np.ones(indices.size, dtype=np.int8), indices, indptr), shape=(u + 1, u + 1))
-    parent = breadth_first_order(linked, source, directed=True, return_predecessors=True)[1]
-    root = np.where(parent >= 0, parent, -1)
-    root[seeds] = seeds
-    root[source] = -1
-    reached = root >= 0
-    # Climb the search tree by pointer jumping until every reached vertex sits on its seed.
-    while True:
-        up = np.where(reached, root[np.maximum(root, 0)], -1)
-        if np.array_equal(up, root):
-            break
-        root = up
-    root = root[:u]
+    sources = dijkstra(_edge_lengths(points, graph), directed=True, indices=seeds, min_only=True,
+                       return_predecessors=True)[2]
     rank = np.full(u, -1, dtype=np.int64)
     rank[seeds] = np.arange(seeds.size)
-    label = np.where(root >= 0, rank[np.maximum(root, 0)], -1)
+    label = np.where(sources >= 0, rank[np.maximum(sources, 0)], -1)
     lost = np.flatnonzero(label < 0)
     label[lost] = seeds.size + np.arange(lost.size)
     return label, np.concatenate([seeds, lost])
@@ -159,7 +166,7 @@ def cluster_mesh(points, triangles, normals, components, graph, area, target_ver
     seeds = _seeds(points, components, size)
     if not 0.8 * target_vertices <= seeds.size <= 1.25 * target_vertices:
         seeds = _seeds(points, components, size * np.sqrt(seeds.size / max(target_vertices, 1)))
-    label, rep = _voronoi_labels(graph, seeds)
+    label, rep = _voronoi_labels(points, graph, seeds)
     summed = _summed_normals(label, normals, rep.size)
     # Only faces with corners in three clusters make coarse faces; after a split, those are the
     # ones that did before and the ones touching the split clusters' vertices.
