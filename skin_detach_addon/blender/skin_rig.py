@@ -52,7 +52,7 @@ def mesh_of(obj):
 def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, progress=None):
     """Bind ``obj`` (Object Mode) and make its proxy object; returns the core build stats.
     A mesh of more than ``preview_above`` vertices (None: never) also gets a hidden preview
-    object, about :data:`PREVIEW_VERTICES` vertices (a quarter of the mesh at most) bound to the same proxy, which drags show
+    object, about :data:`PREVIEW_VERTICES` vertices (an eighth of the mesh at most) bound to the same proxy, which drags show
     instead of the detail (and the build simplifies through it: much faster at millions).
     A previous binding is replaced: its proxy goes, handles made from detail vertices are
     carried over to the new proxy (back at rest), handles made from proxy vertices are removed."""
