@@ -14,10 +14,11 @@ from . import handles, mesh_io
 RIG_COLLECTION = "Skin Detach"
 PROXY_TAG = stored.PROXY_TAG
 PREVIEW_TAG = stored.PREVIEW_TAG
-#: Meshes with more vertices than this get a preview by default (see :func:`build`): above it, a
-#: drag move writing every vertex (solve + rebuild + write + Blender's update) no longer fits in
-#: 33 ms on the 2-core reference machine (README, "Millions of vertices").
-PREVIEW_ABOVE = 400_000
+#: Meshes with more vertices than this get a preview by default (see :func:`build`): a drag move
+#: writing every vertex (solve + rebuild + write + Blender's update) takes 28.6 ms at 200K and
+#: 33.9 ms at 300K vertices on the 2-core reference machine, so above it a move no longer fits in
+#: 33 ms (30 per second); with the preview it takes 17-22 ms at any size (README, figures).
+PREVIEW_ABOVE = 300_000
 #: Vertices of the preview (clusters of the detail mesh).
 PREVIEW_VERTICES = 60_000
 
