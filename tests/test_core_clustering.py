@@ -124,3 +124,12 @@ def test_a_proxy_vertex_without_faces_never_leaves_detail_unbound():
     skin, _ = bind_skin(mesh.points, mesh.normals, carrier, proxy_points, mesh.triangles)
     assert np.array_equal(np.unique(skin.vertex), np.arange(mesh.points.shape[0]))
     assert (skin.case == CASE_TWO).all()
+
+
+def test_loose_points_and_duplicates_go_through_the_preview_path(bundled):
+    points, tris = bundled("bunny")
+    mixed = np.concatenate([points, points[:50] + 0.37 * diagonal(points), points[:10]])  # loose, then duplicates
+    sds = SkinDetachedSurface.build(mixed, tris, target_faces=300, preview_vertices=3000)
+    assert sds.preview is not None and sds.stats["welded_duplicates"] == 10
+    assert (sds.skin.case[sds.weld[points.shape[0]:points.shape[0] + 50]] == 4).all()  # loose
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - mixed).max() <= 1e-9 * diagonal(mixed)
