@@ -3,7 +3,6 @@
 import pathlib
 
 import numpy as np
-from mathutils import Vector
 
 import bpy
 
@@ -73,6 +72,18 @@ def rig(obj, target_faces=300, axis=2):
     assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
     handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
     return handle
+
+
+def save_and_reopen(path, name="spot"):
+    """Save the file to ``path``, drop the runtime cache, reopen it; returns (the object ``name``,
+    its first handle)."""
+    from skin_detach_addon.blender import binding
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    binding._CACHE.clear()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    obj = bpy.data.objects[name]
+    return obj, [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
 
 
 def all_data(mesh):

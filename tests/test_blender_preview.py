@@ -7,11 +7,10 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from blender_support import TopView, activate, rig  # noqa: E402
-from blender_support import import_spot  # noqa: E402
+from blender_support import TopView, activate, import_spot, rig, save_and_reopen  # noqa: E402
 
 from skin_detach_addon import api  # noqa: E402
-from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
+from skin_detach_addon.blender import binding, mesh_io, skin_rig  # noqa: E402
 from skin_detach_addon.blender.drag_session import CANCELLED, FINISHED, DragSession  # noqa: E402
 from skin_detach_addon.ui import live_update  # noqa: E402
 
@@ -127,13 +126,7 @@ def test_live_update_shows_the_preview_then_writes_the_detail_when_idle(scene):
 
 def test_preview_survives_save_and_reload_and_goes_with_clear(scene, tmp_path):
     obj, handle = _rigged(scene)
-    path = tmp_path / "preview.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    binding._CACHE.clear()
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    obj = bpy.data.objects["spot"]
-    handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
+    obj, handle = save_and_reopen(tmp_path / "preview.blend")
     before = mesh_io.read_positions(obj.data)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (120, 90))

@@ -5,7 +5,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from blender_support import activate, band, import_spot, rig, select_vertices  # noqa: E402
+from blender_support import activate, band, import_spot, rig, save_and_reopen, select_vertices  # noqa: E402
 
 from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
 
@@ -138,13 +138,7 @@ def test_save_reload_then_apply_without_rebuilding(scene, tmp_path):
     bpy.ops.skin_detach.apply()
     expected = mesh_io.read_positions(obj.data)
     bpy.ops.skin_detach.reset()
-    path = tmp_path / "bound.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    binding._CACHE.clear()
-    bpy.ops.wm.read_homefile(use_empty=True)
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    obj = bpy.data.objects["spot"]
-    handle = [e for e in handles.handles_of(obj) if handles.kind_of(e) == handles.HANDLE][0]
+    obj, handle = save_and_reopen(tmp_path / "bound.blend")
     activate(handle)
     handle.location.x += 0.15
     assert bpy.ops.skin_detach.apply() == {'FINISHED'}

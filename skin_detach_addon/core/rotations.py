@@ -14,7 +14,6 @@ the cross product, so det U = det V = 1) and R = U V^T.
 
 import numpy as np
 
-from .geometry import cross_rows
 
 #: Jacobi sweeps at most (quadratic convergence: 3x3 matrices converge in about four) ...
 MAX_SWEEPS = 8
