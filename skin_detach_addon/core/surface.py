@@ -27,6 +27,9 @@ FORMAT_VERSION = 1
 FORMAT_TAG = "skin_detach_surface"
 #: With the normal test on, the library simplifies to this many times the target first.
 NORMAL_TEST_OVERSAMPLE = 1.5
+#: ... and 1.25 times when it simplifies a clustered copy: measured on the armadillo at 800K, the
+#: test then stops at 1,036 faces for 1,000 (1,204 from 1.5) with fewer disagreeing normals.
+CLUSTERED_OVERSAMPLE = 1.25
 
 _SKIN_FIELDS = ("vertex", "face", "bary", "height", "weight", "case")
 #: Stored barycentrics, heights and weights above this magnitude are refused as corrupt.
@@ -143,7 +146,7 @@ class SkinDetachedSurface:
                                      preview_vertices)
         clustering = time.perf_counter()
         report(0.2, "simplifying")
-        oversample = NORMAL_TEST_OVERSAMPLE if normal_test else 1.0
+        oversample = (CLUSTERED_OVERSAMPLE if clustered is not None else NORMAL_TEST_OVERSAMPLE) if normal_test else 1.0
         if clustered is None:
             proxy = simplify(mesh.points, mesh.triangles, mesh.components, target, oversample)
             carrier = proxy.carrier
