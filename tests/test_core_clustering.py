@@ -5,7 +5,7 @@ import pytest
 
 from conftest import diagonal
 from shapes import box, closed_mouth, merge, plane, random_rotation
-from skin_detach_addon.core import SkinDetachedSurface
+from skin_detach_addon.core import SkinDetachedSurface, SkinDetachError
 from skin_detach_addon.core.clustering import cluster_mesh
 from skin_detach_addon.core.geometry import face_cross, unique_edges, unit_rows
 from skin_detach_addon.core.prepared_mesh import prepare_mesh
@@ -79,8 +79,11 @@ def test_build_through_the_preview_keeps_the_skin_guarantees(bundled):
     moved = sds.proxy_vertices @ rotation.T + shift
     assert np.abs(preview.surface.reconstruct(moved) - (preview.points @ rotation.T + shift)).max() <= 1e-9 * diag
     assert np.abs(sds.reconstruct(moved) - (points @ rotation.T + shift)).max() <= 1e-9 * diag
-    # Small meshes are left as they are.
+    # Small meshes are left as they are; a preview size must be a sensible count.
     assert SkinDetachedSurface.build(*box(), target_faces=50, preview_vertices=10_000).preview is None
+    for bad in (0, 3, 2.5, True, "many"):
+        with pytest.raises(SkinDetachError, match="preview_vertices"):
+            SkinDetachedSurface.build(*box(), target_faces=50, preview_vertices=bad)
 
 
 def test_closed_mouth_does_not_tear_through_the_pre_reduction():

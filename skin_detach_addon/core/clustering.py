@@ -156,11 +156,11 @@ def _faults(label, rep, triangles, summed, points):
 
 def cluster_mesh(points, triangles, normals, components, graph, area, target_vertices):
     """:class:`Clustered` copy of the mesh with about ``target_vertices`` clusters (``graph``: its
-    :func:`~.geometry.half_edge_graph`, ``area``: its surface area). The cell size is set from the area and corrected once from the count; then,
-    up to :data:`REPAIR_ROUNDS` times, faulty clusters (see :func:`_faults`) are split back into
-    their vertices, so the coarse mesh has the detail's topology (a closed detail gives a closed,
-    manifold, consistently facing coarse mesh; what is left faulty after the rounds is only where
-    the detail itself is)."""
+    :func:`~.geometry.half_edge_graph`, ``area``: its surface area). The cell size is set from
+    the area and corrected once from the seed count; then, up to :data:`REPAIR_ROUNDS` times,
+    faulty clusters (see :func:`_faults`) are split back into their vertices, so the coarse mesh
+    has the detail's topology: a closed detail gives a closed, manifold, consistently facing
+    copy (tested); on an open one the clusters along the border end as single vertices."""
     u = points.shape[0]
     size = np.sqrt(CELLS_PER_AREA * max(area, 1e-300) / max(target_vertices, 1))
     seeds = _seeds(points, components, size)

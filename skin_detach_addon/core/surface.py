@@ -20,7 +20,7 @@ from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
 from .simplification import follow_nearest, simplify
 from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement
-from .validation import as_points, as_target_faces, as_triangles, as_vertex_ids
+from .validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
 
 #: Version of the saved format; files of another version are refused.
 FORMAT_VERSION = 1
@@ -126,6 +126,7 @@ class SkinDetachedSurface:
         points = as_points("vertices", vertices)
         faces = as_triangles("triangles", triangles, points.shape[0])
         target = as_target_faces(target_faces)
+        preview_vertices = as_preview_vertices(preview_vertices)
         if not isinstance(normal_test, (bool, np.bool_)):
             raise SkinDetachError(f"normal_test: expected True or False, got {normal_test!r}")
 

@@ -61,6 +61,21 @@ def as_target_faces(target_faces):
     return int(target_faces)
 
 
+#: Smallest preview a build makes (a clustered copy of fewer vertices is no use to look at).
+MIN_PREVIEW_VERTICES = 16
+
+
+def as_preview_vertices(preview_vertices):
+    """``preview_vertices`` as None or an int of at least MIN_PREVIEW_VERTICES."""
+    if preview_vertices is None:
+        return None
+    if isinstance(preview_vertices, bool) or not isinstance(preview_vertices, (int, np.integer)) \
+            or preview_vertices < MIN_PREVIEW_VERTICES:
+        raise SkinDetachError(f"preview_vertices: expected None or an integer of at least {MIN_PREVIEW_VERTICES}, "
+                              f"got {preview_vertices!r}")
+    return int(preview_vertices)
+
+
 def as_vertex_ids(name, ids, n_points):
     """``ids`` as a 1-D int64 array of indices in [0, n_points)."""
     raw = np.asarray(ids)
