@@ -45,6 +45,13 @@ def test_rest_round_trip_on_bundled_meshes(bundled, name):
     assert 0.8 * 1000 <= stats["proxy_faces"] <= 1.25 * 1000
 
 
+def test_collapse_whose_edge_has_no_other_faces_is_refused_not_a_crash(bundled):
+    """cow.obj at 300 faces reaches an edge whose two faces are all its ends have (it crashed)."""
+    points, tris = bundled("cow")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
+
+
 @pytest.mark.parametrize("make", [noisy_box, lambda: plane(24), lambda: closed_mouth()[:2],
                                   lambda: merge(box(), box(offset=(3.0, 0.0, 0.0)))])
 def test_rest_round_trip_on_synthetic_meshes(make):

@@ -199,6 +199,8 @@ class _CollapseState:
             return "topology"
 
         fids = list((self.vfaces[i] | self.vfaces[j]) - shared)
+        if not fids:  # the edge's two faces are all i and j have: collapsing it leaves no surface
+            return "topology"
         old = np.array([self.faces[f] for f in fids], dtype=np.int64)
         new = np.where(old == j, i, old)
         corners = self.points[np.concatenate([old, old])]
