@@ -115,13 +115,24 @@ def test_live_update_shows_the_preview_then_writes_the_detail_when_idle(scene):
     assert np.array_equal(mesh_io.read_positions(obj.data), before)
     assert not binding.preview_of(obj).hide_viewport and obj.hide_viewport
     assert live_update.settle(now=time.monotonic()) is not None  # not idle long enough yet: waits
+    assert live_update.settle(only="another") is not None  # settling another object leaves this one
+    assert not binding.preview_of(obj).hide_viewport
     assert live_update.settle(now=time.monotonic() + 10 * live_update.IDLE_SECONDS) is None
     assert binding.preview_of(obj).hide_viewport and not obj.hide_viewport
     settled = mesh_io.read_positions(obj.data)
     assert np.abs(settled - before).max() > 0.05
+    # A drag starting on a previewed object settles it at once (Drag Handle calls this first).
+    handle.location.x += 0.1
+    bpy.context.view_layer.update()
+    live_update.notice(scene)
+    live_update.flush()
+    assert obj.hide_viewport and np.array_equal(mesh_io.read_positions(obj.data), settled)
+    assert live_update.settle(only=obj.name) is None
+    assert not obj.hide_viewport and np.abs(mesh_io.read_positions(obj.data) - settled).max() > 0.01
     scene.skin_detach.live_update = False
+    again = mesh_io.read_positions(obj.data)
     api.deform(obj)
-    assert np.abs(mesh_io.read_positions(obj.data) - settled).max() <= 1e-5 * _diagonal(obj)
+    assert np.abs(mesh_io.read_positions(obj.data) - again).max() <= 1e-5 * _diagonal(obj)
 
 
 def test_preview_survives_save_and_reload_and_goes_with_clear(scene, tmp_path):

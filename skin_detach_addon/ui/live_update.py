@@ -103,12 +103,15 @@ def flush():
     return None
 
 
-def settle(now=None):
+def settle(now=None, only=None):
     """Write the full detail of every previewed object whose handles have been still for
     :data:`IDLE_SECONDS` (the timer's body, repeating while any preview shows; ``now``: the
-    time.monotonic() to judge by, tests pass a later one)."""
+    time.monotonic() to judge by, tests pass a later one). ``only``, an object name, settles
+    that object at once, idle or not (a drag starting on it wants the full detail first)."""
     now = time.monotonic() if now is None else now
-    for name in [n for n, last in _UNSETTLED.items() if now - last >= IDLE_SECONDS and n not in _pending]:
+    due = [only] if only in _UNSETTLED else [] if only is not None else \
+        [n for n, last in _UNSETTLED.items() if now - last >= IDLE_SECONDS and n not in _pending]
+    for name in due:
         del _UNSETTLED[name]
         obj = bpy.data.objects.get(name)
         if obj is None or not api.is_bound(obj):

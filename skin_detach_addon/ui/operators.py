@@ -221,6 +221,7 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
     def invoke(self, context, event):
         if context.area is None or context.area.type != 'VIEW_3D':
             return self.execute(context)
+        live_update.settle(only=bound_owner(context).name)  # a live-update preview gives way to the detail first
         try:
             self.session = api.DragSession(bound_owner(context), context.active_object,
                                        RegionView(context.region, context.region_data),
