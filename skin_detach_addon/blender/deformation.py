@@ -45,8 +45,9 @@ class StepReport:
 
 @dataclass
 class Snapshot:
-    """What a step may change, saved bit for bit: the mesh and proxy positions (and shape keys,
-    see :func:`mesh_io.snapshot`), every handle's basis matrix by name, and the written digest."""
+    """What a step may change, saved bit for bit: the mesh (None when the session never writes it
+    before it ends) and proxy positions (and shape keys, see :func:`mesh_io.snapshot`), every
+    handle's basis matrix by name, and the written digest."""
 
     mesh: tuple
     proxy: tuple
@@ -170,9 +171,11 @@ class Deformation:
             stored.mark_written(self.obj, detail)
         self.show_preview(False)
 
-    def snapshot(self):
-        """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change."""
-        return Snapshot(mesh_io.snapshot(self.obj.data), mesh_io.snapshot(self.proxy.data),
+    def snapshot(self, mesh=True):
+        """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change; without
+        the mesh (``mesh=False``: None in its place) for a session that only writes the preview
+        until it ends, so its cancel need not write millions of vertices back."""
+        return Snapshot(mesh_io.snapshot(self.obj.data) if mesh else None, mesh_io.snapshot(self.proxy.data),
                         {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_digest(self.obj))
 
     def restore(self, saved):
@@ -181,7 +184,8 @@ class Deformation:
         for empty in self.handles():
             if empty.name in saved.matrices:
                 empty.matrix_basis = saved.matrices[empty.name]
-        mesh_io.restore(self.obj.data, saved.mesh)
+        if saved.mesh is not None:
+            mesh_io.restore(self.obj.data, saved.mesh)
         mesh_io.restore(self.proxy.data, saved.proxy)
         stored.set_written_digest(self.obj, saved.digest)
         self.show_preview(False)

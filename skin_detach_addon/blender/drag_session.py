@@ -70,7 +70,8 @@ class DragSession:
         n = self.deformation.binding.surface.n_detail
         self.previewing = (preview_above is not None and n > preview_above
                            and self.deformation.preview is not None)
-        self._saved = self.deformation.snapshot()
+        # A previewing session writes the mesh only in its confirm, after which nothing is restored.
+        self._saved = self.deformation.snapshot(mesh=not self.previewing)
         self.start = empty.matrix_world.copy()
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
