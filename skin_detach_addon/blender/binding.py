@@ -226,27 +226,28 @@ def _checked_rest(obj, props, n):
     return rest
 
 
+def _stored_object(obj, key):
+    """The object stored under ``key`` in ``obj``'s binding, or None when there is none or it was
+    deleted (deleting an object in the viewport unlinks it; the pointer may keep an orphan alive)."""
+    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
+        return None
+    found = obj[KEY].get(key)
+    if found is None or not hasattr(found, "users_scene") or getattr(found, "type", None) is None \
+            or not found.users_scene:
+        return None
+    return found
+
+
 def proxy_of(obj):
     """The proxy object of ``obj``, or None when it has none or it was deleted."""
-    if not has_binding(obj):
-        return None
-    props = obj[KEY]
-    proxy = props.get("proxy") if hasattr(props, "get") else None
-    # Deleting an object in the viewport unlinks it; the pointer here may keep an orphan alive.
-    if proxy is None or not hasattr(proxy, "users_scene") or getattr(proxy, "type", None) is None \
-            or not proxy.users_scene:
-        return None
-    return proxy
+    return _stored_object(obj, "proxy")
 
 
 def preview_of(obj):
     """The preview object of ``obj`` when it has one, it still exists and it matches the stored
     preview (same vertex count), else None (a drag then shows the full detail)."""
-    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
-        return None
-    preview = obj[KEY].get("preview")
-    if preview is None or not hasattr(preview, "users_scene") or getattr(preview, "type", None) != 'MESH' \
-            or not preview.users_scene or preview.get(PREVIEW_TAG) != obj:
+    preview = _stored_object(obj, "preview")
+    if preview is None or preview.type != 'MESH' or preview.get(PREVIEW_TAG) != obj:
         return None
     count = obj[KEY].get(PREVIEW_PREFIX + "weld")
     if count is None or len(preview.data.vertices) != len(count):

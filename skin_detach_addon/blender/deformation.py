@@ -129,16 +129,17 @@ class Deformation:
         self._check_writable(result.vertices, (self.proxy, preview))
         mesh_io.write_positions(preview.data, positions)
         mesh_io.write_positions(self.proxy.data, result.vertices)
-        self.show_preview(True)
+        self.show_preview(True, preview)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, positions)
         self.binding.last_step = dict(report.figures(), preview=True)
         return report
 
-    def show_preview(self, shown):
-        """Show the preview object and hide the mesh in viewports, or the other way round. The
-        mesh's own state is remembered on the first show and given back exactly."""
-        preview = self.preview
+    def show_preview(self, shown, preview=None):
+        """Show the preview object (``preview``, looked up when not given) and hide the mesh in
+        viewports, or the other way round. The mesh's own state is remembered on the first show
+        and given back exactly."""
+        preview = self.preview if preview is None else preview
         if preview is None:
             return
         if shown and preview.hide_viewport:
