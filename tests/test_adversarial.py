@@ -247,3 +247,44 @@ def test_a_binding_that_is_not_a_group_is_refused_and_the_panel_still_draws(rigg
     assert any(kind == "label" and value.startswith("Detail:") for kind, value in _draw_panel())
     with pytest.raises(RuntimeError, match="binding group"):  # headless, an ERROR report raises
         bpy.ops.skin_detach.apply()
+
+
+def sliver_icosphere():
+    """Icosphere (float32) with a zero-area sliver on each edge: a face (a, b, m), m the midpoint
+    of the edge ab (its own vertex), as the active object."""
+    import bmesh
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3)
+    obj = bpy.context.active_object
+    mesh = bmesh.new()
+    mesh.from_mesh(obj.data)
+    for edge in list(mesh.edges):
+        a, b = edge.verts
+        mesh.faces.new((a, b, mesh.verts.new((a.co + b.co) / 2)))
+    mesh.to_mesh(obj.data)
+    mesh.free()
+    obj.data.update()
+    activate(obj)
+    return obj
+
+
+def test_sliver_faces_build_finite_coefficients_and_deform_at_rest_writes_the_rest(scene):
+    obj = sliver_icosphere()
+    api.build(obj, target_faces=100, preview_above=None)
+    rest = meshes()[obj.data.name].reshape(-1, 3)
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.7))
+    api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.7))
+    skin = binding.open_binding(obj).surface.skin
+    for name in ("bary", "height", "weight"):
+        assert np.isfinite(getattr(skin, name)).all(), name
+    api.deform(obj)
+    out = meshes()[obj.data.name].reshape(-1, 3)
+    assert np.isfinite(out).all()
+    assert np.abs(out - rest).max() <= 1e-5
+
+
+def test_a_non_finite_array_is_never_written(rigged):
+    obj, _ = rigged
+    from skin_detach_addon.blender import mesh_io
+    bad = meshes()[obj.data.name].reshape(-1, 3).copy()
+    bad[7, 1] = np.nan
+    refused(lambda: mesh_io.write_positions(obj.data, bad), "expected finite vertex positions, got 1 vertices")

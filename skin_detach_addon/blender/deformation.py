@@ -126,7 +126,7 @@ class Deformation:
         start = time.perf_counter()
         _, result, groups = self._solve_proxy(tol)
         positions = self.binding.rebuild_preview(result.vertices, groups)
-        self._check_writable(result.vertices, (self.proxy, preview))
+        self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)
         mesh_io.write_positions(self.proxy.data, result.vertices)
         self.show_preview(True, preview)
@@ -150,13 +150,14 @@ class Deformation:
             preview.hide_viewport = True
             self.obj.hide_viewport = bool(self.obj[stored.KEY].get("mesh_hidden", False))
 
-    def _check_writable(self, proxy_positions, targets):
-        """Raise, writing nothing, unless the solved proxy is finite and no target is in Edit Mode."""
-        # The detail comes from the stored rest or from a rebuild, which refuses non-finite inputs
-        # (core.reconstruction), so only the small proxy array needs a look here.
+    def _check_writable(self, proxy_positions, targets, positions):
+        """Raise, writing nothing, unless the solved proxy and every array to write (``positions``,
+        one per target after the proxy) are finite and no target is in Edit Mode."""
         if not np.isfinite(proxy_positions).all():
             raise SkinDetachError(f"object {self.obj.name!r}: expected finite proxy positions, the solve gave NaN or "
                                   f"inf (nothing was written); check the handles' transforms")
+        for target, array in zip(targets[1:], positions):
+            mesh_io.check_positions(f"object {target.name!r} (nothing was written)", array)
         for target in targets:
             if target.mode == 'EDIT' or target.data.is_editmode:
                 raise SkinDetachError(f"object {target.name!r}: expected Object Mode, its mesh is in Edit Mode "
@@ -165,7 +166,7 @@ class Deformation:
     def _write(self, detail, proxy_positions, mark=True):
         """Write the mesh and the proxy, or neither: every check comes first. The mesh is shown
         again if a preview stood in for it."""
-        self._check_writable(proxy_positions, (self.obj, self.proxy))
+        self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
         if mark:

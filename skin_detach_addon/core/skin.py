@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .errors import SkinDetachError
 from .threads import map_blocks
 from .geometry import barycentric_from_dots, bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
 
@@ -35,6 +36,11 @@ DISTANCE_EPS = 1e-9
 #: Vertices handled per vectorised batch (bounds the memory of the build; batches run on the
 #: core's threads).
 CHUNK = 65536
+#: A proxy face whose height is under this fraction of its longest edge carries no vertex.
+SLIVER = 1e-6
+#: Barycentrics and heights (over the face's size) above this magnitude are absurd: the build
+#: refuses to make them (a stored skin holding such values is refused as corrupt on load).
+MAX_COEFFICIENT = 1e6
 
 CASE_ONE, CASE_TWO, CASE_THREE, CASE_LOOSE = 1, 2, 3, 4
 
@@ -80,8 +86,13 @@ class ProxyFrames:
         self.uu = np.einsum("ij,ij->i", self.e1, self.e1)
         self.uv = np.einsum("ij,ij->i", self.e1, self.e2)
         self.vv = np.einsum("ij,ij->i", self.e2, self.e2)
-        scale = np.maximum(self.uu, self.vv)
-        self.valid = self.cross_len > 1e-12 * np.maximum(scale, 1e-300)
+        e3 = self.e2 - self.e1
+        scale = np.maximum(np.maximum(self.uu, self.vv), np.einsum("ij,ij->i", e3, e3))
+        # A sliver (height under SLIVER of its longest edge) gives no frame: barycentrics over it
+        # are ill-conditioned (and uv^2 - uu vv cancels to zero in floating point).
+        self.valid = self.cross_len > SLIVER * np.maximum(scale, 1e-300)
+        #: (k,) the barycentric denominator uv^2 - uu vv = -|e1 x e2|^2, without the cancellation.
+        self.denominator = -self.cross_len ** 2
 
         self.ring = vertex_faces(triangles, m)
         #: (m,) the vertex has a valid face around it (only those can carry case-2 vertices).
@@ -115,7 +126,8 @@ class ProxyFrames:
         w = points - self.p0[faces]
         wu = np.einsum("ij,ij->i", w, self.e1[faces])
         wv = np.einsum("ij,ij->i", w, self.e2[faces])
-        bary = barycentric_from_dots(self.uu[faces], self.uv[faces], self.vv[faces], wu, wv, self.valid[faces])
+        bary = barycentric_from_dots(self.uu[faces], self.uv[faces], self.vv[faces], wu, wv, self.valid[faces],
+                                     self.denominator[faces])
         distance = np.einsum("ij,ij->i", w, self.normal[faces])
         return bary, distance
 
@@ -246,7 +258,21 @@ def bind_skin(points, normals, carrier, proxy_points, proxy_triangles):
     weight = area / np.bincount(vertex, weights=area, minlength=u)[vertex]
     height = distance / np.sqrt(frames.cross_len[face])
     skin = Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=case)
+    check_coefficients(skin, "the built skin")
     return skin, ring_disagree & normals.any(axis=1)
+
+
+def check_coefficients(skin, source):
+    """Raise :class:`SkinDetachError` unless the skin's barycentrics, heights and weights are finite,
+    of magnitude at most :data:`MAX_COEFFICIENT`, and the weights are >= 0 (a rebuild from such a
+    skin is finite for every finite proxy)."""
+    for name in ("bary", "height", "weight"):
+        values = getattr(skin, name)
+        if not np.isfinite(values).all() or (values.size and np.abs(values).max() > MAX_COEFFICIENT):
+            raise SkinDetachError(f"{source}: expected finite skin_{name} of magnitude at most {MAX_COEFFICIENT:g}, "
+                                  f"got NaN, inf or absurd values; rebuild the skin")
+    if skin.weight.size and skin.weight.min() < 0:
+        raise SkinDetachError(f"{source}: expected skin_weight >= 0, got {skin.weight.min():g}; rebuild the skin")
 
 
 def bound_disagreement(skin, normals, proxy_points, proxy_triangles):

@@ -19,7 +19,7 @@ from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
 from .simplification import follow_nearest, simplify
-from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement
+from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement, check_coefficients
 from .validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
 
 #: Version of the saved format; files of another version are refused.
@@ -32,8 +32,6 @@ NORMAL_TEST_OVERSAMPLE = 1.5
 CLUSTERED_OVERSAMPLE = 1.25
 
 _SKIN_FIELDS = ("vertex", "face", "bary", "height", "weight", "case")
-#: Stored barycentrics, heights and weights above this magnitude are refused as corrupt.
-MAX_STORED_COEFFICIENT = 1e6
 
 
 def topology_fingerprint(n_vertices, triangles):
@@ -294,13 +292,7 @@ class SkinDetachedSurface:
                     height=np.asarray(arrays["skin_height"], dtype=np.float64).ravel(),
                     weight=np.asarray(arrays["skin_weight"], dtype=np.float64).ravel(),
                     case=np.asarray(arrays["skin_case"]).astype(np.int8).ravel())
-        for name in ("bary", "height", "weight"):
-            values = getattr(skin, name)
-            if not np.isfinite(values).all() or (values.size and np.abs(values).max() > MAX_STORED_COEFFICIENT):
-                raise SkinDetachError(f"{source}: expected finite skin_{name} of magnitude at most "
-                                      f"{MAX_STORED_COEFFICIENT:g}, got NaN, inf or absurd values; rebuild the skin")
-        if skin.weight.size and skin.weight.min() < 0:
-            raise SkinDetachError(f"{source}: expected skin_weight >= 0, got {skin.weight.min():g}; rebuild the skin")
+        check_coefficients(skin, source)
         n_assoc = skin.vertex.shape[0]
         if not (skin.face.shape[0] == skin.bary.shape[0] == skin.height.shape[0] == skin.weight.shape[0] == n_assoc):
             raise SkinDetachError(f"{source}: expected skin arrays of {n_assoc} associations each, got lengths "
