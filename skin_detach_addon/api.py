@@ -132,12 +132,14 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     return empty
 
 
-def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False):
+def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False, follow=False):
     """Solve the proxy from the current transforms of every handle and anchor of ``obj`` and
     write the rebuilt positions into its mesh (and the proxy). ``tol``: :data:`SETTLE_TOL` for a
-    result to keep, :data:`DRAG_TOL` while interacting. Returns a dict: milliseconds, iterations,
-    converged, volume_change (of the proxy), preview. Raises, writing nothing, when the mesh was
-    edited since Skin Detach last wrote it.
+    result to keep, :data:`DRAG_TOL` while interacting. The solve starts from rest, so the same
+    handles always give the same shape; ``follow=True`` (interactive updates) continues from the
+    last solves instead, so the shape follows the handles' path. Returns a dict: milliseconds,
+    iterations, converged, volume_change (of the proxy), preview. Raises, writing nothing, when
+    the mesh was edited since Skin Detach last wrote it.
 
     ``preview=True`` on a mesh with a preview object writes the preview instead and shows it in
     place of the mesh, which keeps what it holds until the next full deform (falls back to the
@@ -147,8 +149,8 @@ def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False):
     bpy.context.view_layer.update()  # world matrices of handles moved by a script
     deformation = Deformation(obj, preserve_volume)
     if preview and deformation.preview is not None:
-        return dict(deformation.preview_step(tol).figures(), preview=True)
-    return dict(deformation.step(tol).figures(), preview=False)
+        return dict(deformation.preview_step(tol, follow=follow, budget_ms=None).figures(), preview=True)
+    return dict(deformation.step(tol, follow=follow).figures(), preview=False)
 
 
 def reset(obj):

@@ -119,3 +119,25 @@ def test_unregister_leaves_nothing_behind(scene):
         assert not bpy.app.timers.is_registered(live_update.flush)
     finally:
         skin_detach_addon.register()
+
+
+def test_drag_confirm_writes_what_the_last_move_showed_and_apply_forgets_the_path(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    session = DragSession(obj, handle, TopView(0.01), (100, 0))
+    for k in range(1, 16):
+        session.event("MOUSEMOVE", "NOTHING", (100 + 2 * k, k))
+    shown = mesh_io.read_positions(obj.data).astype(np.float64)
+    assert session.event("RET", "PRESS", (130, 15)) == FINISHED and session.last.converged
+    written = mesh_io.read_positions(obj.data).astype(np.float64)
+    size = np.ptp(written, axis=0).max()
+    assert np.abs(written - shown).max() <= 2e-3 * size
+    from skin_detach_addon import api
+    pose = handle.matrix_world.copy()
+    api.deform(obj)
+    applied = mesh_io.read_positions(obj.data).copy()
+    handle.location.x += 0.3
+    api.deform(obj)
+    handle.matrix_world = pose
+    api.deform(obj)
+    assert np.abs(mesh_io.read_positions(obj.data) - applied).max() <= 1e-6 * size

@@ -54,19 +54,28 @@ class Binding:
         self.last_step = None
         self._mirrors = {}
 
-    def solve_proxy(self, ids, targets, preserve_volume, tol):
+    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
-        One :class:`DualLaplacian` is factored per set of ids (the last few are kept), and each
-        solve is warm-started from the previous solution of the same set."""
+        One :class:`DualLaplacian` is factored per set of ids (the last few are kept). With
+        ``follow`` the solve starts from the extrapolation 2 x_1 - x_2 of the last two solutions of
+        the same set (or from the last one), as a drag does, and stops after ``budget_ms``
+        (None: no limit); without it from rest, so the same handles give the same shape whatever
+        was solved before (Apply, bake)."""
         key = (ids.tobytes(), bool(preserve_volume))
         if key not in self._solvers:
             if len(self._solvers) >= 8:
                 self._solvers.pop(next(iter(self._solvers)))
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
-                                                preserve_volume=preserve_volume), None]
-        entry = self._solvers[key]
-        result = entry[0].solve(targets, initial=entry[1], max_iter=MAX_ITERATIONS, tol=tol)
-        entry[1] = result.vertices
+                                                preserve_volume=preserve_volume), []]
+        solver, recent = self._solvers[key]
+        initial = None
+        if follow and recent:
+            # The targets moved on: extrapolate the motion; they stand still (a confirm): go on from the last.
+            moved = len(recent) == 2 and not np.array_equal(recent[0][ids], targets)
+            initial = 2.0 * recent[0] - recent[1] if moved else recent[0]
+        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
+                              budget_ms=budget_ms if follow else None)
+        self._solvers[key][1] = [result.vertices] + recent[:1]
         return result
 
     def mirror_map(self, axis):
@@ -78,7 +87,7 @@ class Binding:
 
     def forget_warm_starts(self):
         for entry in self._solvers.values():
-            entry[1] = None
+            entry[1] = []
 
     def rebuild(self, proxy_vertices, groups=None):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``groups``: their

@@ -17,12 +17,15 @@ from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handles, mesh_io
 
-#: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL: the estimated distance
-#: to the minimum within about 0.3 % of the diagonal, settled on confirm) ...
-DRAG_TOL = 1e-5
-#: ... and when a result is kept (Apply, live update, confirm, bake): tight enough that the
-#: result does not depend on where the warm start came from.
+#: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL: a Newton step of at
+#: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
+#: stationary point) ...
+DRAG_TOL = 1e-8
+#: ... and when a result is kept (Apply, live update, confirm, bake).
 SETTLE_TOL = 1e-12
+#: Milliseconds a drag move's solve may start new iterations in; a move that cannot converge in
+#: them stops there and the next move continues from it.
+DRAG_BUDGET_MS = 8.0
 
 
 @dataclass
@@ -77,33 +80,35 @@ class Deformation:
         """The handle and anchor empties of the object, sorted by name."""
         return handles.handles_of(self.obj, self.proxy)
 
-    def _solve_proxy(self, tol):
-        """(empties, :class:`DualLaplacianResult`, rigid groups (m,)) from the handles' transforms."""
+    def _solve_proxy(self, tol, follow=False, budget_ms=None):
+        """(empties, :class:`DualLaplacianResult`, rigid groups (m,)) from the handles' transforms
+        (``follow``, ``budget_ms``: see :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
         ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        return empties, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol), groups
+        return empties, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms), groups
 
-    def solve(self, tol=SETTLE_TOL):
-        """Solve (to ``tol``, see :class:`DualLaplacian`) and rebuild without writing anything.
-        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
-        positions (a buffer the next call reuses)."""
-        empties, result, groups = self._solve_proxy(tol)
+    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None):
+        """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
+        last solves, within ``budget_ms``) and rebuild without writing anything. Returns the
+        :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail positions (a
+        buffer the next call reuses)."""
+        empties, result, groups = self._solve_proxy(tol, follow, budget_ms)
         detail = self.binding.rebuild(result.vertices, groups)
         axis = handles.symmetry_axis(empties)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return result, detail
 
-    def step(self, tol=SETTLE_TOL, mark=True):
+    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
         binding (and, with ``mark``, the written digest: a drag marks only its last step, the
         confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
-        result, detail = self.solve(tol)
+        result, detail = self.solve(tol, follow, budget_ms)
         self._write(detail, result.vertices, mark)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
@@ -115,7 +120,7 @@ class Deformation:
         """The preview object a drag may show instead of the mesh, or None."""
         return stored.preview_of(self.obj) if self.binding.preview is not None else None
 
-    def preview_step(self, tol=DRAG_TOL):
+    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS):
         """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
         shows the preview in place of the mesh (see :meth:`show_preview`). Returns a
         :class:`StepReport` whose positions are the preview's (c, 3)."""
@@ -124,7 +129,7 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, groups = self._solve_proxy(tol)
+        _, result, groups = self._solve_proxy(tol, follow, budget_ms)
         positions = self.binding.rebuild_preview(result.vertices, groups)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)

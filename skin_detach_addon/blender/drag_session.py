@@ -10,7 +10,7 @@ import math
 
 from mathutils import Matrix, Vector
 
-from .deformation import DRAG_TOL, Deformation
+from .deformation import DRAG_BUDGET_MS, DRAG_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
@@ -184,15 +184,16 @@ class DragSession:
     def _place(self, matrix):
         self.empty.matrix_world = matrix
         if self.previewing:
-            self.last = self.deformation.preview_step(DRAG_TOL)
-        else:
-            self.last = self.deformation.step(tol=DRAG_TOL, mark=False)  # confirm marks (or cancel restores)
+            self.last = self.deformation.preview_step(DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS)
+        else:  # the confirm marks (or the cancel restores)
+            self.last = self.deformation.step(DRAG_TOL, mark=False, follow=True, budget_ms=DRAG_BUDGET_MS)
         self.step_ms.append(self.last.milliseconds)
 
     def confirm(self):
-        """Keep the result, settled to the tight tolerance so it does not depend on the path."""
+        """Keep the result: the last move's shape certified to the tight tolerance (continued from
+        it, so what the drag showed is what is written)."""
         if self.last is not None:
-            self.last = self.deformation.step()
+            self.last = self.deformation.step(follow=True)
         return FINISHED
 
     def cancel(self):

@@ -20,19 +20,15 @@ cell (R_i) and per vertex (R_v), with the constrained vertices held exactly,
 
 (the paper's coordinates with their frames rotated, the dual cell's spokes that fix R_i, and
 cotangent-weighted as-rigid-as-possible spokes), subject to every constrained closed component
-keeping its rest volume. Local step: every rotation at once (:func:`.rotations.best_rotations`,
-exact minimisers). Global step: one back-substitution with the factor of B^T B (B stacks all
-rows; it depends only on which vertices are constrained), then, with volume kept, the step
-along K^-1 grad V that restores the volume exactly, halved (backtracking) until the energy has
-not risen. So E never rises from one iterate to the next (``result.energy``); Anderson-mixed
-iterates are kept only when their energy is not above the plain step's start. It has
-converged when the largest squared move of a vertex in one iteration, over the squared
-bounding-box diagonal, times ((rate / (1 - rate))^2, at least 1, for the worst recent ratio of
-successive moves) is at most ``tol``: an estimate of the squared distance to the limit. A far
-jump of the constraints is reached in stages (continuation), and an initial guess far from the
-targets is not used (the solve starts from rest), so the same constraints give the same shape
-whatever came before. E is zero at rest, invariant under rigid motions and scales with the
-square of a uniform scale, so the solution follows both.
+keeping its rest volume. The energy, with the rotations eliminated, and its derivatives are in
+:mod:`.rotated_energy`, the constraint in :mod:`.volume_constraint`, the iteration (projected
+Newton, converged when the Newton step's largest vertex move is within ``sqrt(tol)`` of the
+diagonal) in :mod:`.projected_newton`; this class assembles them and holds the factor of
+K = B^T B over the free vertices that preconditions every Newton step. ``solve`` without an
+initial guess starts from rest, and a far jump of the constraints is reached in stages
+(continuation), so the same constraints give the same shape whatever was solved before; with
+a guess (a drag's previous move) it follows from there. E is zero at rest, invariant under
+rigid motions and scales with the square of a uniform scale, so the solution follows both.
 
 Method "paper" is the paper's iteration, kept for comparison: minimise ||A X - delta||^2 with
 delta_i = h_i n_i(X), the normals updated from the current neighbours each iteration (a fixed
@@ -40,6 +36,7 @@ point, not the minimiser of an energy: it can cycle, and then returns its calmes
 optionally with the rigidity spokes.
 """
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,10 +44,11 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from .errors import SkinDetachError
-from .geometry import (barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, signed_volumes,
-                       unique_edges, unit_rows)
-from .rotations import WarmRotations
+from .geometry import barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, unique_edges, unit_rows
+from .projected_newton import largest_step, minimise
+from .rotated_energy import RotatedEnergy
 from .validation import as_points, as_triangles, as_vertex_ids
+from .volume_constraint import VolumeConstraint
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
 DEGENERATE_DUAL = 1e-10
@@ -63,27 +61,13 @@ METHODS = ("rotated", "paper")
 DEFAULT_METHOD = "rotated"
 #: Weight of the rigidity (rotated rest vertex spoke) term against the dual rows, per method.
 DEFAULT_RIGIDITY = {"rotated": 1.0, "paper": 0.0}
-#: Newton steps on the cubic volume-versus-step polynomial per iteration.
-VOLUME_NEWTON_STEPS = 3
-#: Past iterates mixed by Anderson acceleration of the normal-update iteration (and of the
-#: rotated local-global steps when ``tol`` is below ANDERSON_BELOW: settling and continuation
-#: stages, not the loose solves of a drag, which stop after a couple of plain steps).
+#: Past iterates mixed by Anderson acceleration of the paper's normal-update iteration.
 ANDERSON_WINDOW = 5
-ANDERSON_BELOW = 1e-5
 #: Continuation of the "rotated" solve: constrained vertices moving more than STAGE_JUMP of the
 #: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
 STAGE_JUMP = 0.1
-#: An initial guess whose constrained vertices are farther than this (over the diagonal) from
-#: their targets is not used: the solve starts from rest, as a cold one does.
-WARM_LIMIT = 0.1
 MAX_STAGES = 12
-STAGE_TOL = 1e-6
-#: The convergence test of the "rotated" solve looks at the step ratios of this many iterations
-#: (the first iteration, with no ratio yet, assumes the slowest rate, 0.9: factor 81).
-TAIL_WINDOW = 3
-TAIL_MAX = 81.0
-#: Halvings of the step at most when the volume projection would raise the energy.
-VOLUME_BACKTRACKS = 12
+STAGE_TOL = 1e-4
 #: Stop when this many iterations in a row have not reached a new smallest change.
 STALL_ITERATIONS = 12
 
@@ -194,19 +178,6 @@ def _face_frames(points, faces):
     return e1, cross_rows(n, e1), n
 
 
-def closed_components(faces, labels):
-    """Sorted labels (from per-vertex ``labels``) of the watertight components: every directed
-    edge a->b is matched by as many b->a (non-manifold edges with paired sides count as closed)."""
-    face_label = labels[faces[:, 0]]
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * labels.size + np.maximum(a, b)
-    unique, inverse = np.unique(key, return_inverse=True)
-    balance = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=unique.size)
-    open_label = np.unique(np.repeat(face_label, 3)[balance[inverse] != 0])
-    return np.setdiff1d(np.unique(face_label), open_label)
-
-
 class DualLaplacian:
     """Dual Laplacian solver for one proxy and one set of constrained vertices.
 
@@ -274,24 +245,9 @@ class DualLaplacian:
         else:
             self._setup_paper(m)
 
-        self._face_label = labels[self.faces[:, 0]]
         # Closed components: all are measured; those with a constraint are kept at rest volume.
-        self._all_closed = closed_components(self.faces, labels)
-        self._rest_volume = signed_volumes(self.rest, self.faces, self._face_label, self._all_closed)
-        self._closed = np.intersect1d(self._all_closed, np.unique(labels[ids])) if self.preserve_volume else \
-            np.zeros(0, dtype=np.int64)
-        self._closed_faces = np.flatnonzero(np.isin(self._face_label, self._closed))
-        self._closed_face_slot = np.searchsorted(self._closed, self._face_label[self._closed_faces])
-        self._closed_rest_volume = self._rest_volume[np.searchsorted(self._all_closed, self._closed)]
-        in_closed = np.isin(labels, self._closed)
-        self._free_in_closed = in_closed[self.free]
-        self._vertex_slot = np.where(in_closed, np.searchsorted(self._closed, labels), 0)
-        closed_faces = self.faces[self._closed_faces]
-        n_closed = closed_faces.shape[0]
-        self._closed_face_sum = sp.csr_matrix((np.ones(n_closed), (self._closed_face_slot, np.arange(n_closed))),
-                                              shape=(self._closed.size, n_closed))
-        self._closed_scatter = sp.csr_matrix(
-            (np.ones(3 * n_closed), (closed_faces.ravel(), np.repeat(np.arange(n_closed), 3))), shape=(m, n_closed))
+        self.volume = VolumeConstraint(self.rest, self.faces, labels,
+                                       np.unique(labels[ids]) if self.preserve_volume else np.zeros(0, dtype=np.int64))
 
     def _factor(self, normal_eq):
         """Factor the normal equations (free x free) with a tiny proximal term that keeps them
@@ -326,17 +282,7 @@ class DualLaplacian:
             groups.append(k + self._spoke_tail)
             n_groups = k + m
         b = sp.csr_matrix(sp.vstack(blocks))
-        row_group = np.concatenate(groups)
-        rest_rows = b @ self.rest
-        # M_j = G diag(rest rows' coordinate j) B (groups x m): the covariance of every group is
-        # C[:, :, j] = M_j X, and B^T (rotated rest rows) = sum_j M_j^T R[:, :, j].
-        self._moments = [sp.csr_matrix((rest_rows[:, j], (row_group, np.arange(b.shape[0]))),
-                                       shape=(n_groups, b.shape[0])) @ b for j in range(3)]
-        self._moments = [sp.csr_matrix(matrix) for matrix in self._moments]
-        self._moments_t = [matrix.T.tocsr() for matrix in self._moments]
-        self._gram = sp.csr_matrix(b.T @ b)  # K = B^T B (m x m): |B X - T|^2 = X.K X - 2 X.B^T T + |T|^2
-        self._rest_norm = float(np.sum(rest_rows * rest_rows))  # |T|^2: rotations keep lengths
-        self._rotations = WarmRotations()
+        self.energy_terms = RotatedEnergy(b, np.concatenate(groups), n_groups, self.rest)
         b_free = b[:, self.free].tocsc()
         self._gram_fixed = sp.csr_matrix(b_free.T @ b[:, self.fixed])
         self._factor(b_free.T @ b_free)
@@ -403,56 +349,42 @@ class DualLaplacian:
             rotation[flip] = np.einsum("nji,nkj->nik", vt[flip], u[flip])
         return np.einsum("nij,nj->ni", rotation[self._spoke_tail], rest)
 
-    def _keep_volume(self, points, direction):
-        """``points`` moved by lambda_c ``direction`` per constrained closed component c so that
-        its volume returns to rest: V(X + lambda d) is a cubic in lambda, solved by scalar
-        Newton steps."""
-        f = self.faces[self._closed_faces]
-        x, d = points[f], direction[f]
-        x0, x1, x2, d0, d1, d2 = x[:, 0], x[:, 1], x[:, 2], d[:, 0], d[:, 1], d[:, 2]
-        x12, d12 = cross_rows(x1, x2), cross_rows(d1, d2)
-        mixed = cross_rows(d1, x2) + cross_rows(x1, d2)
-        dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
-        per_face = np.stack([dot(x0, x12), dot(d0, x12) + dot(x0, mixed), dot(x0, d12) + dot(d0, mixed),
-                             dot(d0, d12)], axis=1) / 6.0
-        coeffs = np.asarray(self._closed_face_sum @ per_face)
-        coeffs[:, 0] -= self._closed_rest_volume
-        step = np.zeros(self._closed.size)
-        for _ in range(VOLUME_NEWTON_STEPS):
-            value = coeffs[:, 0] + step * (coeffs[:, 1] + step * (coeffs[:, 2] + step * coeffs[:, 3]))
-            slope = coeffs[:, 1] + step * (2 * coeffs[:, 2] + step * 3 * coeffs[:, 3])
-            safe = np.abs(slope) > 1e-300
-            step[safe] -= value[safe] / slope[safe]
-        return points + step[self._vertex_slot][:, None] * direction
-
-    def _volume_gradient(self, corners):
-        """(m, 3) gradient of the closed components' volumes from their faces' ``corners``
-        (f, 3, 3): on a closed component, a sixth of the sum of a vertex's face cross products."""
-        edges = corners[:, 1:] - corners[:, :1]
-        return (self._closed_scatter @ cross_rows(edges[:, 0], edges[:, 1])) / 6.0
-
     def volume_change(self, points):
         """V/V_rest - 1 summed over the closed components (nan if there is none)."""
-        if not self._all_closed.size:
-            return float("nan")
-        rest = self._rest_volume.sum()
-        return float(signed_volumes(points, self.faces, self._face_label, self._all_closed).sum() / rest - 1.0)
+        return self.volume.change(points)
 
-    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6):
+    def _volume_direction(self, points):
+        """(m, 3) K^-1 grad V over the free vertices of the kept components (zero elsewhere): the
+        direction :meth:`VolumeConstraint.restore` moves along."""
+        out = np.zeros_like(points)
+        gradient = self.volume.gradient(points)[self.free] * self.volume.in_kept[self.free][:, None]
+        out[self.free] = self._lu.solve(np.ascontiguousarray(gradient))
+        return out
+
+    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None):
         """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3).
 
-        ``initial`` (m, 3), e.g. the previous result while dragging, warm-starts the normals.
-        Stops when the largest squared move of a vertex in one iteration, over the squared
-        bounding-box diagonal, is at most ``tol`` (converged), after ``max_iter`` iterations, or
-        when :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
+        Without ``initial`` the solve starts from rest (the same constraints give the same shape
+        whatever was solved before); ``initial`` (m, 3), e.g. the extrapolated previous moves of a
+        drag, starts it there instead. "rotated": converged when the Newton step's largest vertex
+        move, squared over the squared diagonal, is at most ``tol`` (:mod:`.projected_newton`);
+        ``budget_ms`` (None: no limit) stops it after the iteration that ends past that many
+        milliseconds (not converged: the next call may continue from its result). "paper": stops
+        when the largest squared move of a vertex in one iteration is at most ``tol``, or when
+        :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
+        Either stops after ``max_iter`` iterations.
         """
+        begun = time.perf_counter()
         targets = as_points("constrained_positions", constrained_positions, self.constrained.size)
         points = self.rest.copy() if initial is None else as_points("initial", initial, self.rest.shape[0]).copy()
         if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
             raise SkinDetachError(f"max_iter: expected a positive integer, got {max_iter!r}")
         if not (isinstance(tol, (int, float, np.floating)) and np.isfinite(tol) and tol >= 0):
             raise SkinDetachError(f"tol: expected a finite number >= 0, got {tol!r}")
+        if budget_ms is not None and (isinstance(budget_ms, bool) or not isinstance(budget_ms, (int, float, np.number))
+                                      or not budget_ms > 0):
+            raise SkinDetachError(f"budget_ms: expected None or a number of milliseconds > 0, got {budget_ms!r}")
         fixed_points = self.rest[self.fixed].copy()
         fixed_points[self._held_in_fixed] = targets
         start = points[self.fixed].copy()
@@ -460,12 +392,13 @@ class DualLaplacian:
         if self._lu is None:
             return DualLaplacianResult(points, 0, True, self.volume_change(points))
         if self.method == "rotated":
-            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol))
+            deadline = None if budget_ms is None else begun + budget_ms / 1000.0
+            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline)
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
             weight = np.sqrt(self.rigidity)
-        keep_volume = self._closed.size > 0
+        keep_volume = self.volume.size > 0
         free = self.free
 
         def step(current):
@@ -474,20 +407,13 @@ class DualLaplacian:
             rhs = self._a_free_t @ (self.deltas(points) - known) + self._proximal * current
             if self.rigidity:
                 rhs += self._e_free_t @ (weight * self.edge_targets(points) - known_edges)
-            if not keep_volume:
-                out = points.copy()
-                out[free] = self._lu.solve(np.ascontiguousarray(rhs))
-                return out[free]
-            # The volume direction K^-1 grad V, with the gradient at this iterate (so that the map
-            # depends on ``current`` alone, as Anderson acceleration needs), rides in the same solve.
-            gradient = self._volume_gradient(points[self.faces[self._closed_faces]])[free] * \
-                self._free_in_closed[:, None]
-            solved = self._lu.solve(np.ascontiguousarray(np.hstack([rhs, gradient])))
             out = points.copy()
-            out[free] = solved[:, :3]
-            direction = np.zeros_like(points)
-            direction[free] = solved[:, 3:]
-            return self._keep_volume(out, direction)[free]
+            out[free] = self._lu.solve(np.ascontiguousarray(rhs))
+            if not keep_volume:
+                return out[free]
+            # The volume direction K^-1 grad V at this iterate (the map depends on ``current`` alone,
+            # as Anderson acceleration needs).
+            return self.volume.restore(out, self._volume_direction(points))[free]
 
         history = []
         converged = False
@@ -497,7 +423,7 @@ class DualLaplacian:
         for iterations in range(1, int(max_iter) + 1):
             mapped = step(current)
             residual = mapped - current
-            change = _largest_step(residual, self.diagonal)
+            change = largest_step(residual, self.diagonal)
             history.append(change)
             if change <= tol:
                 current = mapped
@@ -512,135 +438,34 @@ class DualLaplacian:
         points[free] = current
         return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history)
 
-
-    def _rotated_targets(self, points):
-        """Local step at ``points`` (m, 3): the best rotation of every group (face cells and,
-        with rigidity, vertex one-rings); returns B^T T (m, 3) for the rows' targets T (the
-        rotated rest rows) and the energy |B X - T|^2 (the least over all rotations)."""
-        covariance = np.stack([matrix @ points for matrix in self._moments], axis=2)  # (g, 3, 3)
-        rotations = self._rotations(covariance)
-        pulled = self._moments_t[0] @ rotations[:, :, 0]
-        pulled += self._moments_t[1] @ rotations[:, :, 1]
-        pulled += self._moments_t[2] @ rotations[:, :, 2]
-        energy = float(np.sum(points * (self._gram @ points)) - 2.0 * np.sum(points * pulled) + self._rest_norm)
-        return pulled, max(energy, 0.0)
-
     def energy(self, points):
         """The energy (module docstring) of ``points`` (m, 3), at the best rotations ("rotated" only)."""
         if self.method != "rotated":
             raise SkinDetachError(f"method: expected 'rotated' for an energy, got {self.method!r}")
-        return self._rotated_targets(as_points("points", points, self.rest.shape[0]))[1]
+        return self.energy_terms.energy(as_points("points", points, self.rest.shape[0]))
 
-    def _continue_rotated(self, points, start, fixed_points, max_iter, tol):
+    def _solve_k(self, values):
+        """K^-1 over the free vertices for ``values`` (f, j)."""
+        return self._lu.solve(np.ascontiguousarray(values))
+
+    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline):
         """Where the constrained vertices jump far from ``start`` (their positions in the initial
         guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
-        solved loosely from the last (continuation), so a cold start lands on the minimum a drag
-        along the way would reach, not on a fold the first global step happened to fall into.
-        A guess farther than :data:`WARM_LIMIT` is dropped for the rest shape (path independence)."""
+        solved loosely from the last (continuation), so a start from rest lands on the minimum a
+        drag along the way would reach, not on a fold the first step happened to fall into."""
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
-        if jump > WARM_LIMIT:
-            # Too far for the initial guess to say which minimum is meant: start from rest, so the
-            # same constraints give the same shape whatever was solved before.
-            points = self.rest.copy()
-            start = self.rest[self.fixed]
-            jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         stages = int(min(MAX_STAGES, np.ceil(jump / STAGE_JUMP)))
+        volume = self.volume if self.volume.size else None
         for stage in range(1, stages):
-            partial = start + (stage / stages) * (fixed_points - start)
-            points[self.fixed] = partial
-            points = self._solve_rotated(points, partial, max_iter, STAGE_TOL).vertices
+            points[self.fixed] = start + (stage / stages) * (fixed_points - start)
+            staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
+                              STAGE_TOL, max_iter)
+            points = staged.points
         points[self.fixed] = fixed_points
-        return self._solve_rotated(points, fixed_points, max_iter, tol)
-
-    def _solve_rotated(self, points, fixed_points, max_iter, tol):
-        """Local-global descent on the energy, Anderson-accelerated where the energy agrees."""
-        free = self.free
-        known = self._gram_fixed @ fixed_points
-        keep_volume = self._closed.size > 0
-
-        def energy_with(trial, pulled):
-            """|B X - T|^2 at ``trial`` for the targets whose B^T T is ``pulled``."""
-            return float(np.sum(trial * (self._gram @ trial)) - 2.0 * np.sum(trial * pulled) + self._rest_norm)
-
-        def with_free(values):
-            out = points.copy()
-            out[free] = values
-            return out
-
-        def global_step(current_points, targets, energy):
-            """Minimise |B X - targets|^2 over the free vertices (under the volume constraint,
-            with a backtracking line search so the energy cannot rise); returns free positions."""
-            rhs = targets[free] - known + self._proximal * current_points[free]
-            if not keep_volume:
-                return self._lu.solve(np.ascontiguousarray(rhs)), None
-            gradient = self._volume_gradient(current_points[self.faces[self._closed_faces]])[free] * \
-                self._free_in_closed[:, None]
-            solved = self._lu.solve(np.ascontiguousarray(np.hstack([rhs, gradient])))
-            unconstrained = solved[:, :3]
-            direction = np.zeros_like(points)
-            direction[free] = solved[:, 3:]
-            start = current_points[free]
-            step = 1.0
-            for _ in range(VOLUME_BACKTRACKS):
-                trial = self._keep_volume(with_free(start + step * (unconstrained - start)), direction)
-                if energy_with(trial, targets) <= energy:
-                    break
-                step *= 0.5
-            return trial[free], direction
-
-        targets, energy = self._rotated_targets(points)
-        history, energies = [], [energy]
-        # Anderson steps pay off when settling; a loose (drag) solve stops after a few plain steps.
-        accelerator = _Anderson(ANDERSON_WINDOW if tol < ANDERSON_BELOW else 0)
-        current = points[free].copy()
-        converged = False
-        iterations = 0
-        for iterations in range(1, max_iter + 1):
-            mapped, direction = global_step(with_free(current), targets, energy)
-            residual = mapped - current
-            change = _largest_step(residual, self.diagonal)
-            candidate = accelerator.next(current, mapped, change)
-            if candidate is not mapped:
-                trial = with_free(candidate)
-                if keep_volume:
-                    trial = self._keep_volume(trial, direction)
-                trial_targets, trial_energy = self._rotated_targets(trial)
-                if trial_energy <= energy:
-                    accepted = (trial[free], trial_targets, trial_energy)
-                else:
-                    accelerator.reset()
-                    candidate = mapped
-            if candidate is mapped:
-                mapped_targets, mapped_energy = self._rotated_targets(with_free(mapped))
-                accepted = (mapped, mapped_targets, mapped_energy)
-            moved = accepted[0] - current
-            change = _largest_step(moved, self.diagonal)
-            current, targets, energy = accepted
-            history.append(change)
-            energies.append(energy)
-            if change * _tail_factor(history) <= tol:
-                converged = True
-                break
-        points[free] = current
-        return DualLaplacianResult(points, iterations, converged, self.volume_change(points), history, energies)
-
-
-def _tail_factor(history):
-    """How much farther than its last step a linearly converging iteration may still be from its
-    limit, squared: (rate / (1 - rate))^2 for the worst step ratio of the last few iterations
-    (rate at most 0.9), at least 1, so a converged solve is within ``tol`` of the minimum, not
-    just of its last iterate."""
-    if len(history) < 2:
-        return TAIL_MAX
-    recent = np.sqrt(np.asarray(history[-TAIL_WINDOW - 1:]))
-    ratios = recent[1:] / np.maximum(recent[:-1], 1e-300)
-    rate = min(float(ratios.max()), 0.9)
-    return max(1.0, (rate / (1.0 - rate)) ** 2)
-
-
-def _largest_step(step, diagonal):
-    """Largest squared vertex move of ``step`` (r, 3) over the squared bounding-box diagonal."""
-    return float(np.max(np.einsum("ij,ij->i", step, step))) / diagonal ** 2 if step.size else 0.0
+        result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
+                          max_iter, deadline)
+        return DualLaplacianResult(result.points, result.iterations, result.converged,
+                                   self.volume_change(result.points), result.history, result.energy)
 
 
 def deform_proxy(proxy_vertices, proxy_faces, constrained_ids, constrained_positions, preserve_volume=True,

@@ -97,14 +97,21 @@ class WarmRotations:
         self._guess = None
 
     def __call__(self, covariance):
+        return self.decompose(covariance)[0]
+
+    def decompose(self, covariance):
+        """(R, U, V (r, 3, 3), sigma (r, 3)): R = U V^T and C = U diag(sigma) V^T with U, V proper
+        rotations whose columns run from the largest singular value down (sigma_3 < 0 where
+        det C < 0): sigma_i = u_i . C v_i."""
         guess = self._guess if self._guess is not None and self._guess.shape[0] == len(covariance) else None
-        rotations, self._guess = _fit(covariance, guess)
-        return rotations
+        rotations, self._guess, u, v, sigma = _fit(covariance, guess)
+        return rotations, u, v, sigma
 
 
 def _fit(covariance, guess):
-    """(rotations (r, 3, 3), eigenvectors of C^T C (r, 3, 3)) for ``covariance`` (r, 3, 3); the
-    sweeps start from the orthonormal ``guess`` (r, 3, 3) when given."""
+    """(rotations (r, 3, 3), eigenvectors of C^T C (r, 3, 3), U, V (r, 3, 3), sigma (r, 3)) for
+    ``covariance`` (r, 3, 3) (as in :meth:`WarmRotations.decompose`); the sweeps start
+    from the orthonormal ``guess`` (r, 3, 3) when given."""
     c = np.ascontiguousarray(covariance, dtype=np.float64).reshape(-1, 9)
     r = c.shape[0]
     cc = [c[:, k] for k in range(9)]  # cc[3 i + j] = C_ij
@@ -157,4 +164,12 @@ def _fit(covariance, guess):
     for i in range(3):
         for j in range(3):
             eigenvectors[:, i, j] = v[i][j]
-    return out, eigenvectors
+    left, right = np.empty((r, 3, 3)), np.empty((r, 3, 3))
+    for i in range(3):
+        left[:, i, 0], left[:, i, 1], left[:, i, 2] = u1[i], u2[i], u3[i]
+        right[:, i, 0], right[:, i, 1], right[:, i, 2] = v1[i], v2[i], v3[i]
+    # sigma_k = u_k . C v_k (sigma_1, sigma_2 are the lengths Gram-Schmidt divided by).
+    cv3 = [cc[3 * k] * v3[0] + cc[3 * k + 1] * v3[1] + cc[3 * k + 2] * v3[2] for k in range(3)]
+    sigma = np.stack([np.where(fallback, 0.0, n1), np.where(weak, 0.0, n2) if weak.any() else n2,
+                      u3[0] * cv3[0] + u3[1] * cv3[1] + u3[2] * cv3[2]], axis=1)
+    return out, eigenvectors, left, right, sigma

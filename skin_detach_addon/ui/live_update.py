@@ -81,7 +81,7 @@ def flush():
             try:
                 large = api.figures(obj)["build"].get("detail_vertices", 0) > scene.skin_detach.preview_above
                 stats = api.deform(obj, scene.skin_detach.preserve_volume, api.DRAG_TOL if large else api.SETTLE_TOL,
-                                   preview=large)
+                                   preview=large, follow=True)
                 if stats["preview"]:
                     _UNSETTLED[name] = time.monotonic()
                     if not bpy.app.timers.is_registered(settle):
@@ -118,7 +118,7 @@ def settle(now=None, only=None):
             continue
         _state["busy"] = True
         try:
-            api.deform(obj, bpy.context.scene.skin_detach.preserve_volume)
+            api.deform(obj, bpy.context.scene.skin_detach.preserve_volume, follow=True)
             ERRORS.pop(name, None)
         except SkinDetachError as exc:
             ERRORS[name] = str(exc)

@@ -1,0 +1,189 @@
+"""The iteration of the proxy solve: Newton's method on the rotated energy, projected onto the
+volume constraint.
+
+Arrays: ``points`` (m, 3) indexed by proxy vertex; ``free`` (f,) the ids of the vertices that
+move (the others are held at their given positions); every step is an (f, 3) array.
+
+Minimises E(X) (:class:`.rotated_energy.RotatedEnergy`) over the free vertices subject to every
+kept closed component keeping its rest volume (:class:`.volume_constraint.VolumeConstraint`).
+Each iteration solves the Newton system of the Lagrangian, H_L p = -(grad E + sum_s lambda_s
+grad V_s) on the constraint's tangent space, by conjugate gradients preconditioned with K^-1 (the
+factor of the energy's quadratic part, held by the caller) projected onto the tangent space
+(projected preconditioned CG); the multipliers are the least-squares ones in the K^-1 metric. CG
+stops at the relative residual :data:`FORCING` or on negative curvature (then the step so far, or
+the preconditioned gradient, is still a descent direction). A backtracking line search on E
+(after restoring the volumes along K^-1 grad V) accepts a step only when E has not risen, by the
+Armijo rule, so E never rises from one iterate to the next.
+
+Convergence (the certificate): the distance to the stationary point is estimated by the Newton
+step, which at a point where the Hessian is positive definite (no negative curvature met) is the
+error to second order. The solve has converged when a full Newton step's largest vertex move,
+squared over the squared bounding-box diagonal, is at most ``tol``: either the step proposed at
+the current point, or the full step just taken (the error after it is then a fraction FORCING of
+it, plus its square).
+"""
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: CG stops when its residual (in the K^-1 metric) is this fraction of the gradient's ...
+FORCING = 0.05
+#: ... or after this many iterations.
+CG_ITERATIONS = 200
+#: Armijo's sufficient decrease, and the halvings of the step at most.
+ARMIJO = 1e-4
+BACKTRACKS = 20
+
+
+@dataclass
+class NewtonResult:
+    """points (m, 3); iterations; converged; history (iterations,) largest squared vertex move of
+    each accepted step over the squared diagonal; energy (iterations + 1,) E at the start and
+    after every iteration; stationarity: the last gradient's K^-1 norm over the energy scale."""
+
+    points: np.ndarray
+    iterations: int
+    converged: bool
+    history: list = field(default_factory=list)
+    energy: list = field(default_factory=list)
+    stationarity: float = float("nan")
+
+
+def largest_step(step, diagonal):
+    """Largest squared vertex move of ``step`` (r, 3) over the squared bounding-box diagonal."""
+    return float(np.max(np.einsum("ij,ij->i", step, step))) / diagonal ** 2 if step.size else 0.0
+
+
+class _Tangent:
+    """The volume constraint seen from the free vertices at one iterate: its gradients ``a`` (f, 3),
+    ``d`` = K^-1 a, and the projection of K^-1-preconditioned vectors onto the tangent space."""
+
+    def __init__(self, volume, points, free, solve_k):
+        self.volume = volume
+        self.free = free
+        self.slot = volume.slot[free]
+        self.mask = volume.in_kept[free]
+        self.a = volume.gradient(points)[free] * self.mask[:, None]
+        self.d = solve_k(self.a)
+        self.ad = self._sums(np.einsum("ij,ij->i", self.a, self.d))
+        self.ad = np.where(np.abs(self.ad) > 1e-300, self.ad, 1.0)
+
+    def _sums(self, values):
+        return np.bincount(self.slot[self.mask], weights=values[self.mask], minlength=self.volume.size)
+
+    def coefficients(self, y):
+        """(c,) per component, a . y / a . d: the share of K^-1 a in ``y`` (f, 3)."""
+        return self._sums(np.einsum("ij,ij->i", self.a, y)) / self.ad
+
+    def project(self, y):
+        """``y`` (f, 3), a K^-1-preconditioned vector, less its part along d: a . result = 0."""
+        return y - (self.coefficients(y)[self.slot] * self.mask)[:, None] * self.d
+
+    def direction(self, m):
+        """(m, 3) d on the free vertices, zero elsewhere: the direction volumes are restored along."""
+        out = np.zeros((m, 3))
+        out[self.free] = self.d
+        return out
+
+
+def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None):
+    """Projected Newton (module docstring) from ``points`` (m, 3), whose free rows are the start
+    and whose other rows are held. ``volume``: a VolumeConstraint with at least one kept component,
+    or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``deadline``: a
+    time.perf_counter() value after which no further iteration starts. Returns :class:`NewtonResult`."""
+    x = points.copy()
+    m = x.shape[0]
+    if volume is not None:
+        x = volume.restore(x, _Tangent(volume, x, free, solve_k).direction(m))
+    state = energy.at(x)
+    history, energies = [], [state.energy]
+    converged, stationarity, iterations = False, float("nan"), 0
+    scale = max(energy.scale, 1e-300)
+    for iterations in range(1, max_iter + 1):
+        tangent = _Tangent(volume, x, free, solve_k) if volume is not None else None
+        gradient = state.gradient[free]
+        if tangent is not None:
+            multipliers = -tangent.coefficients(solve_k(gradient))
+            gradient = gradient + (multipliers[tangent.slot] * tangent.mask)[:, None] * tangent.a
+
+        def hessian(p):
+            full = np.zeros((m, 3))
+            full[free] = p
+            out = energy.hessian_product(state, full)
+            if tangent is not None:
+                out += volume.hessian_product(x, full, multipliers)
+            return out[free]
+
+        def precondition(r):
+            y = solve_k(r)
+            return y if tangent is None else tangent.project(y)
+
+        step, negative, stationarity = _newton_step(hessian, precondition, gradient)
+        stationarity /= scale
+        proposed = largest_step(step, diagonal)
+        slope = float(np.sum(gradient * step))
+        if slope >= 0.0 or not np.isfinite(slope):
+            converged = not negative and proposed <= tol
+            iterations -= 1
+            break
+        # Backtracking on E from the full step; volumes restored along K^-1 grad V at x.
+        direction = tangent.direction(m) if tangent is not None else None
+        length, accepted = 1.0, None
+        for _ in range(BACKTRACKS):
+            trial = x.copy()
+            trial[free] += length * step
+            if direction is not None:
+                trial = volume.restore(trial, direction)
+            trial_state = energy.at(trial)
+            if trial_state.energy <= state.energy + ARMIJO * length * slope:
+                accepted = trial_state
+                break
+            if proposed * length * length <= tol * 1e-4:
+                break
+            length *= 0.5
+        if accepted is None:  # no decrease left to find along the step: x is as good as it gets
+            converged = not negative and proposed <= tol
+            iterations -= 1
+            break
+        moved = largest_step(accepted.points[free] - x[free], diagonal)
+        x, state = accepted.points, accepted
+        history.append(moved)
+        energies.append(state.energy)
+        if not negative and length == 1.0 and moved <= tol:
+            converged = True
+            break
+        if deadline is not None and time.perf_counter() > deadline:
+            break
+    return NewtonResult(x, iterations, converged, history, energies, stationarity)
+
+
+def _newton_step(hessian, precondition, gradient):
+    """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients.
+    Returns (p, negative curvature met, gradient . precondition(gradient))."""
+    residual = -gradient
+    z = precondition(residual)
+    rz = float(np.sum(residual * z))
+    start = rz
+    step = np.zeros_like(gradient)
+    direction = z
+    negative = False
+    for k in range(CG_ITERATIONS):
+        product = hessian(direction)
+        curvature = float(np.sum(direction * product))
+        if curvature <= 0.0:
+            negative = True
+            if k == 0:
+                step = direction  # the preconditioned steepest descent direction
+            break
+        alpha = rz / curvature
+        step = step + alpha * direction
+        residual = residual - alpha * product
+        z = precondition(residual)
+        rz_next = float(np.sum(residual * z))
+        if rz_next <= FORCING ** 2 * start:
+            break
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return step, negative, start

@@ -1,0 +1,83 @@
+"""The proxy solve's energy derivatives and its Newton iteration: exact Hessian products, the
+certified stop, the per-move budget, and a start from rest that forgets what came before."""
+
+import numpy as np
+import pytest
+
+from conftest import diagonal
+from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
+from bench.scenario import bend_scenario
+
+
+@pytest.fixture(scope="module")
+def spot_proxy(bundled):
+    points, tris = bundled("spot")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    return sds.proxy_vertices, sds.proxy_faces
+
+
+def bend(points):
+    scenario = bend_scenario(points)
+    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+
+
+def test_gradient_and_hessian_products_match_finite_differences(spot_proxy):
+    points, tris = spot_proxy
+    solver = DualLaplacian(points, tris, np.arange(0, points.shape[0], 9))
+    rng = np.random.default_rng(1)
+    x = points + 0.05 * diagonal(points) * rng.standard_normal(points.shape)
+    direction = rng.standard_normal(points.shape)
+    energy, h = solver.energy_terms, 1e-6
+    state = energy.at(x)
+    slope = (energy.at(x + h * direction).energy - energy.at(x - h * direction).energy) / (2 * h)
+    assert np.isclose(slope, np.sum(state.gradient * direction), rtol=1e-6)
+    curvature = (energy.at(x + h * direction).gradient - energy.at(x - h * direction).gradient) / (2 * h)
+    product = energy.hessian_product(state, direction)
+    assert np.abs(curvature - product).max() <= 1e-6 * np.abs(product).max()
+    volume = solver.volume
+    bend_rate = (volume.gradient(x + h * direction) - volume.gradient(x - h * direction)) / (2 * h)
+    weights = np.full(volume.size, 1.0)
+    assert np.abs(bend_rate - volume.hessian_product(x, direction, weights)).max() <= 1e-6 * np.abs(bend_rate).max()
+
+
+@pytest.mark.parametrize("preserve_volume", [False, True])
+def test_newton_converges_in_few_iterations_and_the_certificate_holds(spot_proxy, preserve_volume):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids, preserve_volume=preserve_volume)
+    result = solver.solve(targets, max_iter=100, tol=1e-12)
+    assert result.converged and result.iterations <= 30
+    # Certified: continuing from the result moves no vertex by more than about sqrt(tol) of the diagonal.
+    again = solver.solve(targets, initial=result.vertices, max_iter=100, tol=1e-16)
+    assert np.abs(again.vertices - result.vertices).max() <= 1e-5 * diagonal(points)
+    if preserve_volume:
+        assert abs(result.volume_change) <= 1e-9
+
+
+def test_a_budget_stops_a_solve_that_the_next_call_continues(spot_proxy):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    cold = solver.solve(targets, max_iter=100, tol=1e-12)
+    start = points.copy()
+    start[ids] = targets
+    partial = solver.solve(targets, initial=start, max_iter=100, tol=1e-12, budget_ms=1e-3)
+    assert not partial.converged and partial.iterations == 1
+    finished = solver.solve(targets, initial=partial.vertices, max_iter=100, tol=1e-12)
+    assert finished.converged
+    assert np.abs(finished.vertices - cold.vertices).max() <= 1e-5 * diagonal(points)
+    with pytest.raises(SkinDetachError, match="budget_ms: expected None or a number of milliseconds > 0, got 0"):
+        solver.solve(targets, budget_ms=0)
+
+
+def test_a_start_from_rest_forgets_the_history(spot_proxy):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    first = solver.solve(targets, max_iter=100, tol=1e-12)
+    rng = np.random.default_rng(3)
+    for _ in range(3):  # other poses in between, as a drag or another frame would solve
+        solver.solve(targets + 0.05 * diagonal(points) * rng.standard_normal(targets.shape), max_iter=100, tol=1e-8)
+    second = solver.solve(targets, max_iter=100, tol=1e-12)
+    assert np.abs(second.vertices - first.vertices).max() <= 1e-9 * diagonal(points)
