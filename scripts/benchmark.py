@@ -58,7 +58,7 @@ TABLE1 = {
     "armadillo-50K": ("armadillo", (), 1000, ("(CI size)", "-", "-", "-", "-")),
 }
 PAPER_ELEPHANT = ("Elephant", "157K", 700, 86, "21 min")
-DRAG_TOL = 1e-5  # the add-on's api.DRAG_TOL (core rows run without bpy, so it is repeated here)
+DRAG_TOL = 1e-8  # the add-on's api.DRAG_TOL (core rows run without bpy, so it is repeated here)
 ARAP_ITERATIONS = 10
 
 

@@ -27,7 +27,7 @@ from bench.scenario import bend_scenario
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
 
 #: The add-on's drag tolerance (api.DRAG_TOL).
-DRAG_TOL = 1e-5
+DRAG_TOL = 1e-8
 DESIGN_ROWS = [
     ("Blender stack (Laplacian Deform proxy + Surface Deform), DESIGN.md", 0.081, 2.0, 4.3),
     ("full-resolution ARAP (libigl), DESIGN.md", 0.045, 1.86, 0.0),

@@ -25,7 +25,7 @@ DRAG_TOL = 1e-8
 SETTLE_TOL = 1e-12
 #: Milliseconds a drag move's solve may start new iterations in; a move that cannot converge in
 #: them stops there and the next move continues from it.
-DRAG_BUDGET_MS = 8.0
+DRAG_BUDGET_MS = 16.0
 
 
 @dataclass
