@@ -67,6 +67,9 @@ ANDERSON_WINDOW = 5
 #: diagonal from the initial guess get there in up to MAX_STAGES stages, each solved to STAGE_TOL.
 STAGE_JUMP = 0.1
 MAX_STAGES = 12
+#: An initial guess whose constrained vertices are farther than this (over the diagonal) from
+#: their targets is not followed: the solve starts from rest, as one without a guess does.
+WARM_LIMIT = 0.1
 STAGE_TOL = 1e-4
 #: Stop when this many iterations in a row have not reached a new smallest change.
 STALL_ITERATIONS = 12
@@ -454,6 +457,12 @@ class DualLaplacian:
         solved loosely from the last (continuation), so a start from rest lands on the minimum a
         drag along the way would reach, not on a fold the first step happened to fall into."""
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
+        if jump > WARM_LIMIT:
+            # Too far for the guess to say which stationary point is meant: start from rest, so the
+            # same constraints give the same shape whatever was solved before.
+            points = self.rest.copy()
+            start = self.rest[self.fixed]
+            jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         stages = int(min(MAX_STAGES, np.ceil(jump / STAGE_JUMP)))
         volume = self.volume if self.volume.size else None
         for stage in range(1, stages):
