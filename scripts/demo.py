@@ -38,7 +38,7 @@ def drag(obj, handle, scenario, steps):
     for k in range(1, steps + 1):
         handle.matrix_world = Matrix((scenario.motion(k / steps) @ rest_world).tolist())
         start = time.perf_counter()
-        api.deform(obj, tol=api.DRAG_TOL)
+        api.deform(obj, tol=api.DRAG_TOL, follow=True)  # a drag follows its path
         times.append(1000 * (time.perf_counter() - start))
     settle = api.deform(obj)  # the result to keep, solved to the settle tolerance
     return times, settle
