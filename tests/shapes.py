@@ -106,3 +106,12 @@ def cylinder(radius=0.5, length=8.0, around=16, along=32):
     bottom = np.stack([np.full(around, low), np.roll(ids[0], -1), ids[0]], 1)
     top = np.stack([np.full(around, high), ids[-1], np.roll(ids[-1], -1)], 1)
     return points, np.concatenate([side, bottom, top])
+
+
+def bend_constraints(points):
+    """The bend scenario (bench.scenario) applied to ``points`` (n, 3) themselves: (constrained
+    ids (c,), their targets (c, 3))."""
+    from bench.scenario import bend_scenario
+    scenario = bend_scenario(points)
+    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])

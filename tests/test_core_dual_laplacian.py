@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import diagonal
-from shapes import box, cylinder, merge, plane, random_rotation
+from shapes import bend_constraints, box, cylinder, merge, plane, random_rotation
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError, deform_proxy
 from bench.scenario import bend_scenario
 from bench.quality import edge_distortion
@@ -18,13 +18,6 @@ def armadillo_proxy(bundled):
     points, tris = bundled("armadillo")
     sds = SkinDetachedSurface.build(points, tris, target_faces=1000)
     return sds.proxy_vertices, sds.proxy_faces
-
-
-def bend_constraints(points):
-    """Bend scenario applied to the proxy itself: (constrained ids, their targets)."""
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
 
 
 def bar_ends(points, length=8.0):

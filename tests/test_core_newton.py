@@ -6,7 +6,7 @@ import pytest
 
 from conftest import diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
-from bench.scenario import bend_scenario
+from shapes import bend_constraints as bend
 
 
 @pytest.fixture(scope="module")
@@ -14,12 +14,6 @@ def spot_proxy(bundled):
     points, tris = bundled("spot")
     sds = SkinDetachedSurface.build(points, tris, target_faces=300)
     return sds.proxy_vertices, sds.proxy_faces
-
-
-def bend(points):
-    scenario = bend_scenario(points)
-    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
-    return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
 
 
 def test_gradient_and_hessian_products_match_finite_differences(spot_proxy):
