@@ -41,14 +41,13 @@ BACKTRACKS = 20
 class NewtonResult:
     """points (m, 3); iterations; converged; history (iterations,) largest squared vertex move of
     each accepted step over the squared diagonal; energy (iterations + 1,) E at the start and
-    after every iteration; stationarity: the last gradient's K^-1 norm over the energy scale."""
+    after every iteration."""
 
     points: np.ndarray
     iterations: int
     converged: bool
     history: list = field(default_factory=list)
     energy: list = field(default_factory=list)
-    stationarity: float = float("nan")
 
 
 def largest_step(step, diagonal):
@@ -99,8 +98,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
         x = volume.restore(x, _Tangent(volume, x, free, solve_k).direction(m))
     state = energy.at(x)
     history, energies = [], [state.energy]
-    converged, stationarity, iterations = False, float("nan"), 0
-    scale = max(energy.scale, 1e-300)
+    converged, iterations = False, 0
     for iterations in range(1, max_iter + 1):
         tangent = _Tangent(volume, x, free, solve_k) if volume is not None else None
         gradient = state.gradient[free]
@@ -120,8 +118,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             y = solve_k(r)
             return y if tangent is None else tangent.project(y)
 
-        step, negative, stationarity = _newton_step(hessian, precondition, gradient)
-        stationarity /= scale
+        step, negative = _newton_step(hessian, precondition, gradient)
         proposed = largest_step(step, diagonal)
         slope = float(np.sum(gradient * step))
         if slope >= 0.0 or not np.isfinite(slope):
@@ -156,12 +153,12 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             break
         if deadline is not None and time.perf_counter() > deadline:
             break
-    return NewtonResult(x, iterations, converged, history, energies, stationarity)
+    return NewtonResult(x, iterations, converged, history, energies)
 
 
 def _newton_step(hessian, precondition, gradient):
     """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients.
-    Returns (p, negative curvature met, gradient . precondition(gradient))."""
+    Returns (p, whether negative curvature was met)."""
     residual = -gradient
     z = precondition(residual)
     rz = float(np.sum(residual * z))
@@ -186,4 +183,4 @@ def _newton_step(hessian, precondition, gradient):
             break
         direction = z + (rz_next / rz) * direction
         rz = rz_next
-    return step, negative, start
+    return step, negative
