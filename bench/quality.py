@@ -36,11 +36,24 @@ def _angles(points, triangles, faces):
     return np.degrees(np.arccos(cosine))
 
 
+def dihedral_changes(rest, deformed, triangles):
+    """(interior edges,) |theta' - theta| in degrees at every interior edge."""
+    before, faces = dihedral_angles(rest, triangles)
+    return np.abs(_angles(deformed, triangles, faces) - before)
+
+
 def dihedral_change(rest, deformed, triangles):
     """Mean over interior edges of |theta' - theta| in degrees: how much the detail bends."""
-    before, faces = dihedral_angles(rest, triangles)
-    after = _angles(deformed, triangles, faces)
-    return float(np.mean(np.abs(after - before)))
+    return float(np.mean(dihedral_changes(rest, deformed, triangles)))
+
+
+#: An edge whose dihedral angle changes by more than this many degrees is a crease.
+CREASE_DEGREES = 30.0
+
+
+def creases(rest, deformed, triangles):
+    """How many interior edges' dihedral angle changed by more than :data:`CREASE_DEGREES`."""
+    return int(np.count_nonzero(dihedral_changes(rest, deformed, triangles) > CREASE_DEGREES))
 
 
 def enclosed_volume(points, triangles):

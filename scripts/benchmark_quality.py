@@ -26,7 +26,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 from bench.arap import arap_reference
 from bench.meshes import bundled
 from bench.poses import pose_suite
-from bench.quality import dihedral_change, edge_distortion, enclosed_volume, is_closed
+from bench.quality import creases, dihedral_change, edge_distortion, enclosed_volume, is_closed
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
@@ -75,6 +75,7 @@ def quality_row(name, method, points, detail, triangles, scenario, diag, closed,
     return dict(mesh=name, method=method, vertices=int(points.shape[0]),
                 edge_distortion=edge_distortion(points, detail, triangles),
                 dihedral_change_deg=dihedral_change(points, detail, triangles),
+                creases=creases(points, detail, triangles),
                 handle_error_pct_diag=100 * float(handle.mean()) / diag,
                 volume_change_pct=(100 * (enclosed_volume(detail, triangles) / enclosed_volume(points, triangles) - 1)
                                    if closed else float("nan")), **extra)
@@ -105,19 +106,16 @@ def main():
                   f"{row['max_warm_cold']:.1e} | {row['settle_ms_median']:.1f} | {row['turned_back_to_rest']:.1e} |",
                   flush=True)
     print(f"\n## Bend scenario, proxy target {args.faces} faces\n")
-    print("| mesh | vertices | method | edge distortion | dihedral change deg | handle error % diag "
-          "| volume change % | converged | settle ms |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| mesh | vertices | method | edge distortion | dihedral change deg | creases (> 30 deg) "
+          "| handle error % diag | volume change % | converged | settle ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in [n for n in args.meshes.split(",") if n]:
         for row in bend_rows(name, args.faces):
             figures["bend"].append(row)
+            settle = f"{row['converged']} | {row['settle_ms']:.0f}" if "settle_ms" in row else "- | -"
             print(f"| {name} | {row['vertices']:,} | {row['method']} | {row['edge_distortion']:.3f} | "
-                  f"{row['dihedral_change_deg']:.2f} | {row['handle_error_pct_diag']:.2e} | "
-                  f"{row['volume_change_pct']:+.2f} | {row.get('converged', '-')} | "
-                  f"{row['settle_ms']:.0f} |" if "settle_ms" in row else
-                  f"| {name} | {row['vertices']:,} | {row['method']} | {row['edge_distortion']:.3f} | "
-                  f"{row['dihedral_change_deg']:.2f} | {row['handle_error_pct_diag']:.2e} | "
-                  f"{row['volume_change_pct']:+.2f} | - | - |", flush=True)
+                  f"{row['dihedral_change_deg']:.2f} | {row['creases']} | {row['handle_error_pct_diag']:.2e} | "
+                  f"{row['volume_change_pct']:+.2f} | {settle} |", flush=True)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(figures, handle, indent=2)

@@ -64,4 +64,5 @@ def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_
     assert {r["mesh"] for r in figures["bend"]} == {"spot", "cow"}
     for row in figures["bend"]:
         assert math.isfinite(row["edge_distortion"]) and math.isfinite(row["dihedral_change_deg"])
-    assert "## Pose suite" in run.stdout and "## Bend scenario" in run.stdout
+        assert 0 <= row["creases"] < 3 * 5856
+    assert "## Pose suite" in run.stdout and "creases (> 30 deg)" in run.stdout and "## Bend scenario" in run.stdout

@@ -75,3 +75,14 @@ def test_a_start_from_rest_forgets_the_history(spot_proxy):
         solver.solve(targets + 0.05 * diagonal(points) * rng.standard_normal(targets.shape), max_iter=100, tol=1e-8)
     second = solver.solve(targets, max_iter=100, tol=1e-12)
     assert np.abs(second.vertices - first.vertices).max() <= 1e-9 * diagonal(points)
+
+
+def test_crease_count_is_zero_at_rest_and_counts_a_fold():
+    from bench.quality import creases
+    from shapes import plane
+    points, tris = plane(6)
+    assert creases(points, points, tris) == 0
+    folded = points.copy()
+    right = folded[:, 0] > 0.5 * (folded[:, 0].min() + folded[:, 0].max())
+    folded[right, 2] = folded[right, 0] - 0.5 * (folded[:, 0].min() + folded[:, 0].max())
+    assert creases(points, folded, tris) > 0
