@@ -146,3 +146,10 @@ def test_preview_survives_save_and_reload_and_goes_with_clear(scene, tmp_path):
     activate(obj)
     api.clear(obj)
     assert not [o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]
+
+
+def test_a_mesh_too_small_for_a_preview_builds_without_one(scene):
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2)  # 42 vertices: an eighth is under the minimum
+    obj = bpy.context.active_object
+    figures = api.build(obj, target_faces=40, preview_above=0)
+    assert figures["preview_vertices"] in (0, None) and binding.preview_of(obj) is None

@@ -361,3 +361,14 @@ def test_rebuild_refuses_non_finite_proxies_instead_of_writing_nan():
                       sds.proxy_vertices, sds.proxy_faces)
     with pytest.raises(SkinDetachError, match="finite"):
         rebuild(broken)  # the check lives in the rebuild itself, not only in the input validation
+
+
+def test_one_stray_vertex_far_away_does_not_refuse_the_build(bundled):
+    points, tris = bundled("spot")
+    stray = np.vstack([points, [[1e7, 0.0, 0.0]]])
+    sds = SkinDetachedSurface.build(stray, tris, target_faces=300)
+    rebuilt = sds.reconstruct(sds.proxy_vertices)
+    size = float(np.ptp(points, axis=0).max())
+    assert np.abs(rebuilt[:-1] - points).max() <= 1e-9 * size
+    assert np.abs(rebuilt[-1] - stray[-1]).max() <= 1.0  # float32's spacing at 1e7 (what Blender stores)
+

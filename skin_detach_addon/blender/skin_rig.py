@@ -8,6 +8,7 @@ from mathutils import Matrix
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from ..core.surface import SkinDetachedSurface
+from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
 from . import handles, mesh_io
 
@@ -63,7 +64,9 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     mesh_io.check_positions(f"mesh {mesh.name!r}", positions)
     triangles = mesh_io.read_triangles(mesh)
     preview_vertices = None
-    if preview_above is not None and positions.shape[0] > preview_above:
+    # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets none.
+    if preview_above is not None and positions.shape[0] > preview_above and \
+            positions.shape[0] // 8 >= MIN_PREVIEW_VERTICES:
         preview_vertices = min(PREVIEW_VERTICES, positions.shape[0] // 8)
     surface = SkinDetachedSurface.build(positions.astype(np.float64), triangles, target_faces=target_faces,
                                         normal_test=normal_test, preview_vertices=preview_vertices,

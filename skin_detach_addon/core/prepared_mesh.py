@@ -12,7 +12,8 @@ import numpy as np
 from .geometry import (bbox_diagonal, component_labels, face_cross, first_of_each_triple, half_edge_graph,
                        vertex_normals)
 
-#: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal.
+#: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal
+#: (of the vertices that faces use).
 DEGENERATE_AREA = 1e-14
 
 
@@ -70,6 +71,15 @@ def weld_map(points):
     return rank[group], first[first_order]
 
 
+def _faces_diagonal(points, triangles, diagonal):
+    """Bounding-box diagonal of the ``points`` (n, 3) that ``triangles`` (f, 3) use (``diagonal``,
+    that of all points, when every point is used): a stray vertex far away does not make every
+    face look degenerate."""
+    used = np.zeros(points.shape[0], dtype=bool)
+    used[triangles.ravel()] = True
+    return diagonal if used.all() else bbox_diagonal(points[used])
+
+
 def prepare_mesh(points, triangles):
     """Weld and clean a validated mesh: ``points`` (n, 3) float64, ``triangles`` (f, 3) int64."""
     diagonal = bbox_diagonal(points)
@@ -82,7 +92,7 @@ def prepare_mesh(points, triangles):
     distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     cross = face_cross(unique_points, faces)
     area2 = np.einsum("ij,ij->i", cross, cross)
-    keep = distinct & (area2 > (DEGENERATE_AREA * max(diagonal, 1e-300) ** 2) ** 2)
+    keep = distinct & (area2 > (DEGENERATE_AREA * max(_faces_diagonal(unique_points, faces, diagonal), 1e-300) ** 2) ** 2)
     kept = faces if keep.all() else faces[keep]
     # Drop repeated faces (same three vertices in any order): they make non-manifold fans of two.
     first = np.flatnonzero(keep)[first_of_each_triple(kept)]

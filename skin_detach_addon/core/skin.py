@@ -39,8 +39,10 @@ CHUNK = 65536
 #: A proxy face whose height is under this fraction of its longest edge carries no vertex.
 SLIVER = 1e-6
 #: Barycentrics and heights (over the face's size) above this magnitude are absurd: the build
-#: refuses to make them (a stored skin holding such values is refused as corrupt on load).
-MAX_COEFFICIENT = 1e6
+#: refuses to make them (a stored skin holding such values is refused as corrupt on load). A
+#: loose vertex a million mesh sizes away still binds (its extended-plane barycentrics are about
+#: its distance over the face's size).
+MAX_COEFFICIENT = 1e12
 
 CASE_ONE, CASE_TWO, CASE_THREE, CASE_LOOSE = 1, 2, 3, 4
 
