@@ -288,3 +288,18 @@ def test_a_non_finite_array_is_never_written(rigged):
     bad = meshes()[obj.data.name].reshape(-1, 3).copy()
     bad[7, 1] = np.nan
     refused(lambda: mesh_io.write_positions(obj.data, bad), "expected finite vertex positions, got 1 vertices")
+
+
+@pytest.mark.parametrize("damage", [{"seconds": 5}, {"detail_vertices": "many"}, {"detail_vertices": None},
+                                    {"proxy_faces": -3, "seconds": {"total": "slow"}}, {"target_reached": "no"}])
+def test_the_panel_draws_over_damaged_stored_figures(rigged, damage):
+    import json
+    from test_blender_rig import _draw_panel
+    obj, _ = rigged
+    stats = json.loads(str(obj[binding.KEY]["stats"]))
+    stats.update(damage)
+    obj[binding.KEY]["stats"] = json.dumps(stats)
+    activate(obj)
+    lines = _draw_panel()
+    assert any(kind == "label" and value.startswith("Detail:") for kind, value in lines)
+    assert any(kind == "label" and value.startswith("Build:") for kind, value in lines)

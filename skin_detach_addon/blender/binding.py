@@ -305,15 +305,33 @@ def last_step(obj):
     return None if binding is None else binding.last_step
 
 
+#: Build figures the add-on reads back, and the type each must have (a damaged one is dropped).
+_COUNTS = ("detail_vertices", "proxy_vertices", "proxy_faces", "target_faces", "preview_vertices")
+
+
 def stats_of(obj):
-    """The core build figures stored with the binding (dict), or {} (also when unreadable)."""
+    """The core build figures stored with the binding (dict), or {} (also when unreadable). Counts
+    that are not non-negative integers, ``seconds`` that is not a dict of numbers and a
+    ``target_reached`` that is not a bool are left out, so readers may trust what is there."""
     if not has_binding(obj) or not hasattr(obj[KEY], "get"):
         return {}
     try:
         stats = json.loads(str(obj[KEY].get("stats", "{}")))
     except ValueError:
         return {}
-    return stats if isinstance(stats, dict) else {}
+    if not isinstance(stats, dict):
+        return {}
+    for key in _COUNTS:
+        value = stats.get(key)
+        if key in stats and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+            del stats[key]
+    seconds = stats.get("seconds")
+    if "seconds" in stats and not (isinstance(seconds, dict) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in seconds.values())):
+        del stats["seconds"]
+    if "target_reached" in stats and not isinstance(stats["target_reached"], bool):
+        del stats["target_reached"]
+    return stats
 
 
 def forget(obj):
