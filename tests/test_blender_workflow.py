@@ -176,3 +176,24 @@ def test_numbers_typed_in_the_drag_set_exact_moves_angles_and_factors(scene):
     assert np.allclose(turned[:3, :3], np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ start[:3, :3], atol=1e-9)
     assert session.event("RET", "PRESS", (90, 70)) == FINISHED
     assert np.isfinite(positions(obj)).all()
+
+
+def test_a_shift_d_copy_of_a_handle_is_newer_and_is_no_twin(scene):
+    from skin_detach_addon.blender import handles
+    obj = monkey()
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")
+    twin = handles.twin_of(grip)
+    assert twin is not None and handles.twin_of(twin) == grip
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    grip.select_set(True)
+    bpy.context.view_layer.objects.active = grip
+    bpy.ops.object.duplicate()
+    copy = bpy.context.active_object
+    assert copy != grip and api.is_handle(copy)
+    assert api.handles_of(obj)[-1] == copy                  # the newest: it wins on shared vertices
+    conflicts = api.handle_conflicts(obj)
+    assert any(c["loser"] == grip.name for c in conflicts)
+    assert handles.twin_of(copy) is None and handles.twin_of(grip) == twin

@@ -75,7 +75,9 @@ def rest_local_of(empty):
 def handles_of(obj, proxy=None):
     """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices)."""
     pool = proxy.children if proxy is not None else _all_objects()
-    return sorted((o for o in pool if is_handle(o) and _get(o, "owner") == obj), key=_age)
+    found = [o for o in pool if is_handle(o) and _get(o, "owner") == obj]
+    ages = _ages(found)
+    return sorted(found, key=lambda o: ages[o.name])
 
 
 def _get(empty, key, default=None):
@@ -83,12 +85,32 @@ def _get(empty, key, default=None):
     return tag.get(key, default) if hasattr(tag, "get") else default
 
 
-def _age(empty):
-    """Sort key: the creation serial, then the name's number (files from before serials), then the name."""
-    serial = _get(empty, "serial")
-    digits = empty.name.rsplit("_", 1)[-1]
-    number = int(digits) if digits.isdigit() else 0
-    return (serial if isinstance(serial, int) else -1, number, empty.name)
+def _ages(empties):
+    """Sort key of every empty by name: (serial, name's number, name). A Shift+D copy keeps its
+    original's serial; where serials repeat, every copy but the first (by Blender's ".001"
+    suffix) counts as made after all the others, so the copy is the newest."""
+    def own(empty):
+        serial = _get(empty, "serial")
+        stem, dot, tail = empty.name.rpartition(".")
+        copy = int(tail) if dot and tail.isdigit() else 0
+        digits = (stem if copy else empty.name).rsplit("_", 1)[-1]
+        return (serial if isinstance(serial, int) else -1, copy, int(digits) if digits.isdigit() else 0, empty.name)
+
+    keys = sorted(own(e) for e in empties)
+    newest = max((key[0] for key in keys), default=0)
+    out, seen = {}, set()
+    for serial, copy, number, name in keys:
+        if serial >= 0 and serial in seen:
+            newest += 1
+            serial = newest
+        seen.add(serial)
+        out[name] = (serial, number, name)
+    return out
+
+
+def next_serial(empties):
+    """The serial of a handle made now: after every one of ``empties`` (copies included)."""
+    return 1 + max((age[0] for age in _ages(empties).values()), default=0)
 
 
 def _all_objects():
@@ -121,10 +143,10 @@ def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None,
     empty.matrix_basis = Matrix.Translation(now_centroid.tolist())
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
-    serials = [_get(o, "serial") for o in handles_of(obj, proxy)]
+    serial = next_serial(handles_of(obj, proxy))
     empty[TAG] = {
         "owner": obj,
-        "serial": 1 + max([v for v in serials if isinstance(v, int)], default=0),
+        "serial": serial,
         "kind": kind,
         "proxy_ids": ids.astype(np.int32),
         "detail_ids": np.asarray(detail_ids if detail_ids is not None else [], dtype=np.int32),
@@ -154,9 +176,10 @@ def pair(first, second):
 
 
 def twin_of(empty):
-    """The mirror twin of a handle or anchor, or None."""
+    """The mirror twin of a handle or anchor, or None: twins point at each other (a Shift+D copy
+    of one keeps a pointer its original's twin does not return)."""
     twin = _get(empty, "twin")
-    return twin if is_handle(twin) else None
+    return twin if is_handle(twin) and _get(twin, "twin") == empty else None
 
 
 def mirror_of(empty):
