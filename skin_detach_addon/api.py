@@ -69,6 +69,7 @@ def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above
     skin_rig.check_mesh_object(obj)
     if obj.mode == 'EDIT' or obj.data.is_editmode:
         raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
+    _write_shown_pose(obj)  # a Rebuild binds the pose the artist sees
     return skin_rig.build(obj, target_faces, normal_test, preview_above, progress)
 
 
@@ -159,8 +160,22 @@ def reset(obj):
 
 
 def clear(obj):
-    """Remove the proxy, every handle and the binding of ``obj``; the mesh keeps its current shape."""
-    skin_rig.clear(_bound(obj))
+    """Remove the proxy, every handle and the binding of ``obj``; the mesh keeps its current shape
+    (the one shown: where the preview stands in, its pose is written in full detail first)."""
+    obj = _bound(obj)
+    _write_shown_pose(obj)
+    skin_rig.clear(obj)
+
+
+def _write_shown_pose(obj):
+    """Where the preview stands in for ``obj``, write the pose it shows into the mesh in full detail
+    (the mesh is shown again); the mesh is shown again even when that cannot be solved."""
+    if not stored.preview_stands_in(obj):
+        return
+    try:
+        Deformation(obj).step(follow=True)
+    finally:
+        stored.end_stand_in(obj)
 
 
 def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):

@@ -81,7 +81,7 @@ def test_preview_cancel_restores_everything_bit_exact(scene):
     before = _state(obj)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
-    assert not binding.preview_of(obj).hide_viewport
+    assert binding.preview_of(obj).hide_viewport  # nothing shows in place of a mesh the user hid
     assert session.event("ESC", "PRESS", (130, 80)) == CANCELLED
     after = _state(obj)
     assert np.array_equal(after[0], before[0]) and np.array_equal(after[1], before[1])
@@ -153,3 +153,59 @@ def test_a_mesh_too_small_for_a_preview_builds_without_one(scene):
     obj = bpy.context.active_object
     figures = api.build(obj, target_faces=40, preview_above=0)
     assert figures["preview_vertices"] in (0, None) and binding.preview_of(obj) is None
+
+
+def _drag_with_preview(scene):
+    obj, handle = _rigged(scene)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    assert obj.hide_viewport and not binding.preview_of(obj).hide_viewport
+    return obj, handle, session
+
+
+@pytest.mark.parametrize("end", ["RET", "ESC"])
+def test_a_preview_deleted_mid_drag_leaves_the_mesh_visible(scene, end):
+    obj, _, session = _drag_with_preview(scene)
+    bpy.data.objects.remove(binding.preview_of(obj))
+    session.event(end, "PRESS", (130, 80))
+    assert not obj.hide_viewport
+
+
+def test_the_user_hiding_the_preview_does_not_hide_the_mesh_for_good(scene):
+    obj, handle, session = _drag_with_preview(scene)
+    binding.preview_of(obj).hide_viewport = True
+    session.event("MOUSEMOVE", "NOTHING", (140, 70))
+    session.event("RET", "PRESS", (140, 70))
+    assert not obj.hide_viewport
+
+
+def test_the_preview_stays_hidden_when_the_user_hid_the_mesh_with_h(scene):
+    obj, handle = _rigged(scene)
+    obj.hide_set(True)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    assert binding.preview_of(obj).hide_viewport and obj.hide_get() and not obj.hide_viewport
+    session.event("RET", "PRESS", (130, 80))
+    assert obj.hide_get() and not obj.hide_viewport
+
+
+@pytest.mark.parametrize("action", ["clear", "rebuild"])
+def test_clear_or_rebuild_while_the_preview_stands_in_keeps_the_shown_pose_visible(scene, action):
+    obj, handle = _rigged(scene)
+    rest = api.rest_positions(obj).copy()
+    handle.location.x += 0.3
+    api.deform(obj, preview=True)
+    assert obj.hide_viewport
+    if action == "clear":
+        api.clear(obj)
+    else:
+        api.build(obj, target_faces=300, preview_above=LOW)
+    assert not obj.hide_viewport
+    moved = mesh_io.read_positions(obj.data)
+    assert np.abs(moved - rest).max() > 0.05 * _diagonal_of(rest)  # the pose shown, not the stale rest
+    if action == "rebuild":
+        assert np.array_equal(api.rest_positions(obj), moved)
+
+
+def _diagonal_of(points):
+    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))

@@ -264,6 +264,30 @@ def preview_of(obj):
     return preview
 
 
+def preview_stands_in(obj):
+    """The preview object stands in for the mesh ``obj``: the add-on hid the mesh in viewports
+    and recorded its own state (a record on a visible mesh is stale: from an older file)."""
+    return has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY] and bool(obj.hide_viewport)
+
+
+def record_stand_in(obj, preview):
+    """Hide the mesh ``obj`` and show ``preview`` in its place, recording the mesh's own state."""
+    obj[KEY]["mesh_hidden"] = bool(obj.hide_viewport)
+    preview.hide_viewport = False
+    obj.hide_viewport = True
+
+
+def end_stand_in(obj):
+    """Give the mesh ``obj`` back its own viewport state and hide its preview (if any is left)."""
+    preview = preview_of(obj) if has_binding(obj) else None
+    if preview is not None:
+        preview.hide_viewport = True
+    if preview_stands_in(obj):
+        obj.hide_viewport = bool(obj[KEY]["mesh_hidden"])
+    if has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY]:
+        del obj[KEY]["mesh_hidden"]
+
+
 def check_unedited(obj):
     """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
     if mesh_io.positions_digest(mesh_io.read_positions(obj.data)) != _stored(obj).get("written_digest"):

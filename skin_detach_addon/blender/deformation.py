@@ -28,6 +28,14 @@ SETTLE_TOL = 1e-12
 DRAG_BUDGET_MS = 16.0
 
 
+def _hidden_by_user(obj):
+    """The mesh object is hidden in viewports (its toggle, or H in the view layer)."""
+    try:
+        return bool(obj.hide_viewport or obj.hide_get())
+    except RuntimeError:  # not in the view layer
+        return bool(obj.hide_viewport)
+
+
 @dataclass
 class StepReport:
     """One solve and write: milliseconds (solve + rebuild + write), iterations, converged,
@@ -142,18 +150,17 @@ class Deformation:
 
     def show_preview(self, shown, preview=None):
         """Show the preview object (``preview``, looked up when not given) and hide the mesh in
-        viewports, or the other way round. The mesh's own state is remembered on the first show
-        and given back exactly."""
+        viewports, or the other way round. While the preview stands in, the binding records the
+        mesh's own state (see :func:`binding.preview_stands_in`), given back exactly whatever
+        happened to the preview meanwhile (deleted, hidden by the user). A mesh the user hid
+        (H or the viewport toggle) gets no preview in its place."""
         preview = self.preview if preview is None else preview
-        if preview is None:
-            return
-        if shown and preview.hide_viewport:
-            self.obj[stored.KEY]["mesh_hidden"] = bool(self.obj.hide_viewport)
-            preview.hide_viewport = False
-            self.obj.hide_viewport = True
-        elif not shown and not preview.hide_viewport:
-            preview.hide_viewport = True
-            self.obj.hide_viewport = bool(self.obj[stored.KEY].get("mesh_hidden", False))
+        if shown:
+            if preview is None or stored.preview_stands_in(self.obj) or _hidden_by_user(self.obj):
+                return
+            stored.record_stand_in(self.obj, preview)
+        else:
+            stored.end_stand_in(self.obj)
 
     def _check_writable(self, proxy_positions, targets, positions):
         """Raise, writing nothing, unless the solved proxy and every array to write (``positions``,
