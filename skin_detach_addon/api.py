@@ -29,7 +29,7 @@ from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
-           "is_bound", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
+           "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
@@ -186,6 +186,12 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     output). Idempotent; the mesh and the scene frame are left as they were. See
     :func:`skin_detach_addon.blender.baking.bake`."""
     return baking.bake(_bound(obj), frames, into, path, preserve_volume, apply_modifiers, progress)
+
+
+def preview_stands_in(obj):
+    """The preview object is shown in place of the mesh ``obj`` (which holds an older pose until
+    the next full :func:`deform`)."""
+    return stored.preview_stands_in(_owner(obj))
 
 
 def is_bound(obj):

@@ -209,3 +209,39 @@ def test_clear_or_rebuild_while_the_preview_stands_in_keeps_the_shown_pose_visib
 
 def _diagonal_of(points):
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+
+
+def _live_preview(scene):
+    obj, handle = _rigged(scene)
+    rest = mesh_io.read_positions(obj.data).copy()
+    scene.skin_detach.live_update = True
+    handle.location.x += 0.3
+    bpy.context.view_layer.update()
+    live_update.notice(scene)
+    live_update.flush()
+    assert obj.hide_viewport and np.array_equal(mesh_io.read_positions(obj.data), rest)
+    return obj, rest
+
+
+def test_save_and_reopen_while_live_update_shows_the_preview_keeps_the_shown_pose(scene, tmp_path):
+    obj, rest = _live_preview(scene)
+    obj, _ = save_and_reopen(tmp_path / "shown.blend")
+    assert not obj.hide_viewport and not api.preview_stands_in(obj)
+    assert np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.05
+
+
+def test_a_file_saved_with_the_preview_standing_in_settles_when_opened(scene, tmp_path):
+    obj, rest = _live_preview(scene)
+    bpy.app.handlers.save_pre.remove(live_update._settle_all)  # as a file saved by an older version
+    try:
+        obj, _ = save_and_reopen(tmp_path / "stale.blend")
+    finally:
+        bpy.app.handlers.save_pre.append(live_update._settle_all)
+    assert not obj.hide_viewport and np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.05
+
+
+def test_a_renamed_mesh_still_settles(scene):
+    obj, rest = _live_preview(scene)
+    obj.name = "renamed"
+    assert live_update.settle(now=time.monotonic() + 10 * live_update.IDLE_SECONDS) is None
+    assert not obj.hide_viewport and np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.05

@@ -26,7 +26,9 @@ ERRORS = {}
 _SOLVED = {}
 #: Seconds without a handle move before a previewed mesh gets its full detail.
 IDLE_SECONDS = 0.4
-#: Objects showing their preview: name -> time.monotonic() of the last preview step.
+#: Objects showing their preview: object pointer (survives a rename) -> time.monotonic() of the
+#: last preview step. Whether a preview stands in is stored with the binding (it survives a
+#: save and reload, which this does not: a mesh with no time here is due at once).
 _UNSETTLED = {}
 
 
@@ -83,11 +85,11 @@ def flush():
                 stats = api.deform(obj, scene.skin_detach.preserve_volume, api.DRAG_TOL if large else api.SETTLE_TOL,
                                    preview=large, follow=True)
                 if stats["preview"]:
-                    _UNSETTLED[name] = time.monotonic()
+                    _UNSETTLED[obj.as_pointer()] = time.monotonic()
                     if not bpy.app.timers.is_registered(settle):
                         bpy.app.timers.register(settle, first_interval=IDLE_SECONDS)
                 else:
-                    _UNSETTLED.pop(name, None)
+                    _UNSETTLED.pop(obj.as_pointer(), None)
                 if stats["converged"]:
                     ERRORS.pop(name, None)
                 else:
@@ -103,30 +105,41 @@ def flush():
     return None
 
 
-def settle(now=None, only=None):
-    """Write the full detail of every previewed object whose handles have been still for
-    :data:`IDLE_SECONDS` (the timer's body, repeating while any preview shows; ``now``: the
-    time.monotonic() to judge by, tests pass a later one). ``only``, an object name, settles
-    that object at once, idle or not (a drag starting on it wants the full detail first)."""
+def settle(now=None, only=None, everything=False):
+    """Write the full detail of every object whose preview stands in and whose handles have been
+    still for :data:`IDLE_SECONDS` (the timer's body, repeating while any preview shows; ``now``:
+    the time.monotonic() to judge by, tests pass a later one). ``only``, an object name, settles
+    that object at once, idle or not (a drag starting on it wants the full detail first);
+    ``everything`` settles all at once (before a save, after a load)."""
     now = time.monotonic() if now is None else now
-    due = [only] if only in _UNSETTLED else [] if only is not None else \
-        [n for n, last in _UNSETTLED.items() if now - last >= IDLE_SECONDS and n not in _pending]
-    for name in due:
-        del _UNSETTLED[name]
-        obj = bpy.data.objects.get(name)
-        if obj is None or not api.is_bound(obj):
-            continue
+    showing = [o for o in bpy.data.objects if api.is_bound(o) and api.mesh_of(o) == o and api.preview_stands_in(o)]
+    if only is not None:
+        due = [o for o in showing if o.name == only]
+    elif everything:
+        due = showing
+    else:
+        due = [o for o in showing if now - _UNSETTLED.get(o.as_pointer(), -float("inf")) >= IDLE_SECONDS
+               and o.name not in _pending]
+    for obj in due:
+        _UNSETTLED.pop(obj.as_pointer(), None)
         _state["busy"] = True
         try:
             api.deform(obj, bpy.context.scene.skin_detach.preserve_volume, follow=True)
-            ERRORS.pop(name, None)
+            ERRORS.pop(obj.name, None)
         except SkinDetachError as exc:
-            ERRORS[name] = str(exc)
+            ERRORS[obj.name] = str(exc)
             print(f"Skin Detach live update: {exc}")
         finally:
             _state["busy"] = False
         remember(obj)
-    return IDLE_SECONDS if _UNSETTLED else None
+    return IDLE_SECONDS if any(api.preview_stands_in(o) for o in showing) else None
+
+
+@persistent
+def _settle_all(*_args):
+    """Before a save and after a load: the mesh holds (and shows) the pose its preview showed."""
+    _UNSETTLED.clear()
+    settle(everything=True)
 
 
 def pending():
@@ -138,11 +151,15 @@ def register():
         bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
     if _on_frame_change not in bpy.app.handlers.frame_change_post:
         bpy.app.handlers.frame_change_post.append(_on_frame_change)
+    for handlers in (bpy.app.handlers.save_pre, bpy.app.handlers.load_post):
+        if _settle_all not in handlers:
+            handlers.append(_settle_all)
 
 
 def unregister():
     for handlers, function in ((bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update),
-                               (bpy.app.handlers.frame_change_post, _on_frame_change)):
+                               (bpy.app.handlers.frame_change_post, _on_frame_change),
+                               (bpy.app.handlers.save_pre, _settle_all), (bpy.app.handlers.load_post, _settle_all)):
         while function in handlers:
             handlers.remove(function)
     for timer in (flush, settle):
