@@ -197,3 +197,26 @@ def test_a_shift_d_copy_of_a_handle_is_newer_and_is_no_twin(scene):
     conflicts = api.handle_conflicts(obj)
     assert any(c["loser"] == grip.name for c in conflicts)
     assert handles.twin_of(copy) is None and handles.twin_of(grip) == twin
+
+
+def test_a_mirror_twin_deleted_in_the_viewport_is_gone(scene):
+    from skin_detach_addon.blender import handles
+    obj = monkey()
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
+    grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")
+    twin = handles.twin_of(grip)
+    twin_name = twin.name
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    twin.select_set(True)
+    bpy.ops.object.delete()
+    assert twin_name not in [e.name for e in api.handles_of(obj)]
+    assert handles.twin_of(grip) is None
+    assert all(twin_name not in (c["winner"], c["loser"]) for c in api.handle_conflicts(obj))
+    grip.location.z += 0.3
+    api.deform(obj)
+    moved = positions(obj)
+    right = np.flatnonzero(rest[:, 0] > 1.0)                 # where the twin was: not carried up 0.3
+    assert np.abs(moved[right, 2] - rest[right, 2]).max() < 0.1

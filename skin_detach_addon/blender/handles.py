@@ -21,7 +21,9 @@ ANCHOR = "ANCHOR"
 
 
 def is_handle(obj):
-    return obj is not None and obj.type == 'EMPTY' and TAG in obj
+    """``obj`` is a handle or anchor empty that is in a scene (one deleted in the viewport but kept
+    alive by another object's pointer, such as its twin's, is gone)."""
+    return obj is not None and obj.type == 'EMPTY' and TAG in obj and len(obj.users_scene) > 0
 
 
 def owner(empty):
