@@ -220,3 +220,30 @@ def test_a_mirror_twin_deleted_in_the_viewport_is_gone(scene):
     moved = positions(obj)
     right = np.flatnonzero(rest[:, 0] > 1.0)                 # where the twin was: not carried up 0.3
     assert np.abs(moved[right, 2] - rest[right, 2]).max() < 0.1
+
+
+def test_typed_numbers_stay_in_budget_and_an_absurd_one_is_refused_as_a_keystroke(scene):
+    import time
+    from blender_support import TopView, import_spot, rig
+    from skin_detach_addon.blender.drag_session import FINISHED, RUNNING, DragSession
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    start = np.array(handle.matrix_world)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("X", "PRESS", (0, 0))
+    times = []
+    for key in ("ZERO", "PERIOD", "EIGHT"):                  # 0.8 along X: a far jump from rest
+        begun = time.perf_counter()
+        assert session.event(key, "PRESS", (0, 0)) == RUNNING
+        times.append(time.perf_counter() - begun)
+    assert max(times) < 0.5                                   # a settle from far away took seconds
+    assert session.event("RET", "PRESS", (0, 0)) == FINISHED
+    assert np.isfinite(positions(obj)).all() and session.last.converged
+    assert np.abs(np.array(handle.matrix_world)[:3, 3] - start[:3, 3]).max() > 0.7
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("X", "PRESS", (0, 0))
+    session.event("ONE", "PRESS", (0, 0))
+    for _ in range(60):                                       # 1 and ever more zeros: soon too far to be finite
+        assert session.event("ZERO", "PRESS", (0, 0)) == RUNNING
+    assert "refused" in session.header and len(session.typed) < 61
+    assert np.isfinite(np.array(handle.matrix_world)).all() and np.isfinite(positions(obj)).all()

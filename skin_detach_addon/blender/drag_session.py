@@ -10,6 +10,7 @@ import math
 
 from mathutils import Matrix, Vector
 
+from ..core.errors import SkinDetachError
 from .deformation import DRAG_BUDGET_MS, DRAG_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
@@ -81,6 +82,8 @@ class DragSession:
         self._reference = Vector(mouse)
         self.step_ms = []
         self.last = None
+        #: Why the last keystroke was refused ("" when it was not).
+        self.refused = ""
 
     @property
     def header(self):
@@ -93,6 +96,8 @@ class DragSession:
         if self.typed:
             unit = {"MOVE": "", "ROTATE": " deg", "SCALE": "x"}[self.mode]
             timing = f"{self.typed}{unit} typed, {timing}"
+        if self.refused:
+            timing = f"{self.refused} | {timing}"
         return (f"Skin Detach {self.mode.lower()}{axis}: {timing} | "
                 f"X/Y/Z axis, G move, R rotate, S scale, LMB/Enter confirm, RMB/Esc cancel")
 
@@ -111,8 +116,15 @@ class DragSession:
         if kind in _TYPED or (kind == "BACK_SPACE" and self.typed):
             if not self.typed:
                 self._settle(Vector(mouse))  # the number applies on top of what the mouse did so far
+            before = self.typed
             self.typed = self.typed[:-1] if kind == "BACK_SPACE" else _typed(self.typed, _TYPED[kind])
-            self._apply_typed()
+            try:
+                self._apply_typed()
+                self.refused = ""
+            except SkinDetachError as exc:  # the keystroke is refused, the drag goes on
+                self.typed = before
+                self.refused = f"{kind} refused: {exc}"
+                self._apply_typed()
         elif kind in _AXES or kind in _MODES:
             if not self.typed:
                 self._settle(Vector(mouse))

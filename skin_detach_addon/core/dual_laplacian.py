@@ -468,8 +468,14 @@ class DualLaplacian:
         for stage in range(1, stages):
             points[self.fixed] = start + (stage / stages) * (fixed_points - start)
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter)
+                              STAGE_TOL, max_iter, deadline)
             points = staged.points
+            if deadline is not None and time.perf_counter() > deadline:
+                # Out of budget: the handles where they belong, the rest where the stages got to; the
+                # next call goes on from there.
+                points[self.fixed] = fixed_points
+                return DualLaplacianResult(points, staged.iterations, False, self.volume_change(points),
+                                           staged.history, staged.energy)
         points[self.fixed] = fixed_points
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
                           max_iter, deadline)
