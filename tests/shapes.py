@@ -115,3 +115,14 @@ def bend_constraints(points):
     scenario = bend_scenario(points)
     ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
     return ids, np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+
+
+def ribbon(length_cells, width=1e-4, rows=3):
+    """Thin flat strip 1 long and ``width`` wide: a (length_cells + 1) x rows grid of float32-rounded
+    points, two triangles per cell."""
+    x, y = np.linspace(0.0, 1.0, length_cells + 1), np.linspace(0.0, width, rows)
+    gx, gy = np.meshgrid(x, y, indexing="ij")
+    points = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1).astype(np.float32).astype(np.float64)
+    index = np.arange(points.shape[0]).reshape(length_cells + 1, rows)
+    a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    return points, np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])

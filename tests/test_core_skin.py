@@ -372,3 +372,11 @@ def test_one_stray_vertex_far_away_does_not_refuse_the_build(bundled):
     assert np.abs(rebuilt[:-1] - points).max() <= 1e-9 * size
     assert np.abs(rebuilt[-1] - stray[-1]).max() <= 1.0  # float32's spacing at 1e7 (what Blender stores)
 
+
+
+@pytest.mark.parametrize("cells", [1999, 4999])
+def test_a_thin_ribbon_rebuilds_its_rest_exactly(cells):
+    from shapes import ribbon
+    points, tris = ribbon(cells)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)

@@ -24,6 +24,9 @@ from .simplification import MIN_COMPONENT_FACES, collapse_roots
 
 #: Collapses that turn a face by more than this (cosine of the old/new normal) are flips.
 FLIP_COSINE = 0.2
+#: A collapse may leave a vertex with at most this many neighbours (no fans: on a thin ribbon
+#: whose borders cannot move, unbounded fans made the loop quadratic in the ribbon's length).
+MAX_VALENCE = 24
 #: Cube-map resolution of the normal histograms: 6 * CUBE_SIDE**2 directions (about 11 degrees).
 CUBE_SIDE = 8
 CUBE_BINS = 6 * CUBE_SIDE * CUBE_SIDE
@@ -192,7 +195,10 @@ class _CollapseState:
         for fid in shared:
             opposite.update(self.faces[fid])
         opposite -= {i, j}
-        if self.neighbours(i) & self.neighbours(j) != opposite:
+        around_i, around_j = self.neighbours(i), self.neighbours(j)
+        if around_i & around_j != opposite:
+            return "topology"
+        if len(around_i | around_j) - 2 > MAX_VALENCE:  # a fan: its checks and re-queued edges grow with it
             return "topology"
         comp = self.component[i]
         if self.comp_faces[comp] - 2 < max(MIN_COMPONENT_FACES, 4):

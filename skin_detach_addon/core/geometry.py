@@ -152,13 +152,12 @@ def first_of_each_triple(triangles):
     return np.flatnonzero(keep)
 
 
-def barycentric_from_dots(uu, uv, vv, wu, wv, valid=None, denominator=None):
+def barycentric_from_dots(uu, uv, vv, wu, wv, valid=None):
     """(r, 3) barycentric weights of drop points in triangles (P1, P2, P3) from dot products only
     (paper eq. 5): with u = P2 - P1, v = P3 - P1 and w = point - P1, every argument (r,) is the
-    dot product its name says. ``denominator`` (r,), if given, is uv^2 - uu vv computed without
-    cancellation (-|u x v|^2). Triangles with a zero denominator, or False in ``valid`` (r,),
+    dot product its name says. Triangles with a zero denominator, or False in ``valid`` (r,),
     divide by one instead (their weights are meaningless; callers mask them)."""
-    denom = uv * uv - uu * vv if denominator is None else denominator
+    denom = uv * uv - uu * vv
     ok = denom != 0.0 if valid is None else valid
     denom = np.where(ok, denom, 1.0)
     s = (uv * wv - vv * wu) / denom

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from .errors import SkinDetachError
 from .threads import map_blocks
-from .geometry import barycentric_from_dots, bbox_diagonal, face_cross, segment_ranges, unit_rows, vertex_faces
+from .geometry import bbox_diagonal, cross_rows, face_cross, segment_ranges, unit_rows, vertex_faces
 
 #: Barycentric tolerance for "the drop point lies in the triangle".
 CONTAIN_EPS = 1e-9
@@ -85,16 +85,17 @@ class ProxyFrames:
         self.e2 = points[triangles[:, 2]] - self.p0
         cross = face_cross(points, triangles)
         self.normal, self.cross_len = unit_rows(cross)
-        self.uu = np.einsum("ij,ij->i", self.e1, self.e1)
-        self.uv = np.einsum("ij,ij->i", self.e1, self.e2)
-        self.vv = np.einsum("ij,ij->i", self.e2, self.e2)
         e3 = self.e2 - self.e1
-        scale = np.maximum(np.maximum(self.uu, self.vv), np.einsum("ij,ij->i", e3, e3))
+        scale = np.maximum.reduce([np.einsum("ij,ij->i", e, e) for e in (self.e1, self.e2, e3)])
         # A sliver (height under SLIVER of its longest edge) gives no frame: barycentrics over it
-        # are ill-conditioned (and uv^2 - uu vv cancels to zero in floating point).
+        # are ill-conditioned.
         self.valid = self.cross_len > SLIVER * np.maximum(scale, 1e-300)
-        #: (k,) the barycentric denominator uv^2 - uu vv = -|e1 x e2|^2, without the cancellation.
-        self.denominator = -self.cross_len ** 2
+        # The dual basis of (e1, e2) in the face's plane: s = w . dual_s, t = w . dual_t for any w
+        # (the normal part drops out), (e2 x N) / |N|^2 and (N x e1) / |N|^2 with N = e1 x e2: two
+        # dot products per test, and no cancellation on thin faces (uv^2 - uu vv has it).
+        squared = np.where(self.valid, self.cross_len ** 2, 1.0)[:, None]
+        self.dual_s = cross_rows(self.e2, cross) / squared
+        self.dual_t = cross_rows(cross, self.e1) / squared
 
         self.ring = vertex_faces(triangles, m)
         #: (m,) the vertex has a valid face around it (only those can carry case-2 vertices).
@@ -123,15 +124,15 @@ class ProxyFrames:
     def project(self, points, faces):
         """Barycentrics (a, 3) and signed distances (a,) of ``points`` (a, 3) over ``faces`` (a,).
 
-        Paper eq. 5: s and t from dot products only, no cross product per test.
+        As paper eq. 5, dot products only, no cross product per test (against the faces' dual
+        bases, which stay accurate on thin faces); invalid faces give meaningless weights (callers
+        mask them).
         """
         w = points - self.p0[faces]
-        wu = np.einsum("ij,ij->i", w, self.e1[faces])
-        wv = np.einsum("ij,ij->i", w, self.e2[faces])
-        bary = barycentric_from_dots(self.uu[faces], self.uv[faces], self.vv[faces], wu, wv, self.valid[faces],
-                                     self.denominator[faces])
+        s = np.einsum("ij,ij->i", w, self.dual_s[faces])
+        t = np.einsum("ij,ij->i", w, self.dual_t[faces])
         distance = np.einsum("ij,ij->i", w, self.normal[faces])
-        return bary, distance
+        return np.stack([1.0 - s - t, s, t], axis=1), distance
 
 
 def _pairs(table, rows, owners):
