@@ -112,8 +112,11 @@ def test_unregister_leaves_nothing_behind(scene):
     scene.skin_detach.live_update = True
     skin_detach_addon.unregister()
     try:
-        names = [f.__name__ for f in bpy.app.handlers.depsgraph_update_post + bpy.app.handlers.frame_change_post]
-        assert not any(name.startswith("_on_") for name in names)
+        handlers = bpy.app.handlers
+        modules = [f.__module__ for f in handlers.depsgraph_update_post + handlers.frame_change_post +
+                   handlers.save_pre + handlers.load_post]
+        assert not any(module.startswith("skin_detach_addon") for module in modules)
+        assert not hasattr(bpy.types, "VIEW3D_MT_skin_detach")
         assert not hasattr(bpy.types.Scene, "skin_detach")
         assert not hasattr(bpy.types, "SKIN_DETACH_OT_build") and not hasattr(bpy.types, "VIEW3D_PT_skin_detach")
         assert not bpy.app.timers.is_registered(live_update.flush)
@@ -141,3 +144,22 @@ def test_drag_confirm_writes_what_the_last_move_showed_and_apply_forgets_the_pat
     handle.matrix_world = pose
     api.deform(obj)
     assert np.abs(mesh_io.read_positions(obj.data) - applied).max() <= 1e-6 * size
+
+
+def test_the_object_menus_list_every_operator(scene):
+    from skin_detach_addon.ui import menus
+    drawn = []
+
+    class Layout:
+        def operator(self, idname, **_):
+            drawn.append(idname)
+
+        def separator(self):
+            pass
+
+    menus.VIEW3D_MT_skin_detach.draw(type("Menu", (), {"layout": Layout()})(), bpy.context)
+    for idname in ("skin_detach.build", "skin_detach.add_handle", "skin_detach.add_anchor", "skin_detach.drag",
+                   "skin_detach.apply", "skin_detach.reset", "skin_detach.clear"):
+        assert idname in drawn
+    for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu"):
+        assert menus._menu_entry in getattr(bpy.types, name)._dyn_ui_initialize()

@@ -4,9 +4,9 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 
 import bpy
 
-from . import live_update, operators, panel, properties
+from . import live_update, menus, operators, panel, properties
 
-CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES
+CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
 
 
 def register():
@@ -14,9 +14,11 @@ def register():
         bpy.utils.register_class(cls)
     properties.register()
     live_update.register()
+    menus.register()
 
 
 def unregister():
+    menus.unregister()
     live_update.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):

@@ -1,0 +1,52 @@
+"""Where Blender users look for commands: a Skin Detach submenu in the 3D View's Object menu (so F3
+menu search finds every operator), the same entries in the object context menu (right click),
+and an add-on keymap entry for Drag Handle that users can change in Preferences > Keymap."""
+
+import bpy
+
+#: The Drag Handle key in Object Mode (Preferences > Keymap > Object Mode > Skin Detach).
+DRAG_KEY = {"type": 'D', "value": 'PRESS', "shift": True, "alt": True}
+_keymaps = []
+
+
+class VIEW3D_MT_skin_detach(bpy.types.Menu):
+    bl_idname = "VIEW3D_MT_skin_detach"
+    bl_label = "Skin Detach"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator("skin_detach.build", icon='MOD_DECIM')
+        layout.separator()
+        layout.operator("skin_detach.add_handle", icon='EMPTY_SINGLE_ARROW')
+        layout.operator("skin_detach.add_anchor", icon='PINNED')
+        layout.operator("skin_detach.drag", icon='VIEW_PAN')
+        layout.operator("skin_detach.apply", icon='CHECKMARK')
+        layout.separator()
+        layout.operator("skin_detach.reset", icon='LOOP_BACK')
+        layout.operator("skin_detach.clear", icon='TRASH')
+
+
+def _menu_entry(self, context):
+    self.layout.menu(VIEW3D_MT_skin_detach.bl_idname)
+
+
+CLASSES = (VIEW3D_MT_skin_detach,)
+_MENUS = ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu")
+
+
+def register():
+    for name in _MENUS:
+        getattr(bpy.types, name).append(_menu_entry)
+    keyconfig = bpy.context.window_manager.keyconfigs.addon
+    if keyconfig is not None:  # none in background mode
+        keymap = keyconfig.keymaps.new(name="Object Mode", space_type='EMPTY')
+        item = keymap.keymap_items.new("skin_detach.drag", **DRAG_KEY)
+        _keymaps.append((keymap, item))
+
+
+def unregister():
+    for keymap, item in _keymaps:
+        keymap.keymap_items.remove(item)
+    _keymaps.clear()
+    for name in _MENUS:
+        getattr(bpy.types, name).remove(_menu_entry)
