@@ -101,6 +101,8 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     surface = binding.surface
     if mirror not in (None, "", *handles.AXES):
         raise SkinDetachError(f"mirror: expected None, 'X', 'Y' or 'Z', got {mirror!r}")
+    if mirror is None and not on_proxy:  # the mesh's own symmetry setting (Edit Mode's X/Y/Z toggles)
+        mirror = next((axis for axis in handles.AXES if getattr(obj.data, f"use_mirror_{axis.lower()}", False)), None)
     if (vertex_ids is None) == (group is None):
         raise SkinDetachError("vertex_ids, group: expected exactly one of them, got "
                               f"{'both' if group is not None else 'neither'}")

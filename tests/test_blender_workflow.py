@@ -247,3 +247,42 @@ def test_typed_numbers_stay_in_budget_and_an_absurd_one_is_refused_as_a_keystrok
         assert session.event("ZERO", "PRESS", (0, 0)) == RUNNING
     assert "refused" in session.header and len(session.typed) < 61
     assert np.isfinite(np.array(handle.matrix_world)).all() and np.isfinite(positions(obj)).all()
+
+
+def _mirror_error(points, axis=0):
+    from skin_detach_addon.core.symmetry import mirror_map
+    mapping = mirror_map(points, axis)
+    matched = np.flatnonzero(mapping >= 0)
+    image = points[mapping[matched]].copy()
+    image[:, axis] *= -1.0
+    return float(np.abs(points[matched] - image).max())
+
+
+@pytest.mark.parametrize("setting", ["mesh symmetry", "mirror flags"])
+def test_mesh_x_symmetry_makes_twins_and_keeps_a_rig_without_mirror_flags_symmetric(scene, setting):
+    from skin_detach_addon.blender import handles
+    obj = monkey()
+    obj.data.use_mirror_x = setting == "mesh symmetry"
+    mirror = None if setting == "mesh symmetry" else "X"
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    size = float(np.ptp(rest, axis=0).max())
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror=mirror)     # the chin: its own mirror image
+    ear = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror=mirror)  # a twin across X
+    assert handles.twin_of(ear) is not None
+    top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75), mirror=mirror)  # self-symmetric
+    ear.location.z += 0.2
+    top.location.x += 0.5                                     # across the plane: cannot stay symmetric
+    top.location.z += 0.1
+    api.deform(obj)
+    moved = positions(obj)
+    assert _mirror_error(moved) <= 1e-6 * size
+    motion = handles.local_motion(obj, top)                  # put back on a symmetric motion: no X move
+    assert abs(motion[0, 3]) <= 1e-9 and np.allclose(motion[:3, :3], np.eye(3), atol=1e-9)
+    assert abs(motion[2, 3] - 0.1) <= 1e-6
+    proxy = api.proxy_of(obj)
+    ids = handles.proxy_ids_of(top)
+    proxy_points = np.array([proxy.data.vertices[i].co for i in ids])
+    from skin_detach_addon.blender import binding
+    targets = binding.open_binding(obj).surface.proxy_vertices[ids] @ motion[:3, :3].T + motion[:3, 3]
+    assert np.abs(proxy_points - targets).max() <= 1e-5 * size  # the handle is exact where it is shown

@@ -75,6 +75,7 @@ class Deformation:
     def __init__(self, obj, preserve_volume=True, require_unedited=True):
         self.obj = obj
         self.binding = stored.open_binding(obj)
+        self.kept_symmetric = []
         self.preserve_volume = bool(preserve_volume)
         self.proxy = self.binding.proxy
         m = self.binding.surface.proxy_vertices.shape[0]
@@ -93,6 +94,9 @@ class Deformation:
         (``follow``, ``budget_ms``: see :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
+        axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
+        #: Self-symmetric handles put back on a symmetric motion by this solve (names).
+        self.kept_symmetric = handles.keep_symmetric(self.obj, empties, axis) if axis else []
         ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
@@ -106,7 +110,7 @@ class Deformation:
         buffer the next call reuses)."""
         empties, result, groups = self._solve_proxy(tol, follow, budget_ms)
         detail = self.binding.rebuild(result.vertices, groups)
-        axis = handles.symmetry_axis(empties)
+        axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return result, detail

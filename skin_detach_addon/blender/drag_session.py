@@ -98,6 +98,8 @@ class DragSession:
             timing = f"{self.typed}{unit} typed, {timing}"
         if self.refused:
             timing = f"{self.refused} | {timing}"
+        if self.deformation.kept_symmetric:
+            timing = f"symmetric rig: the handle moves only symmetrically | {timing}"
         return (f"Skin Detach {self.mode.lower()}{axis}: {timing} | "
                 f"X/Y/Z axis, G move, R rotate, S scale, LMB/Enter confirm, RMB/Esc cancel")
 

@@ -228,11 +228,60 @@ def sync_twins(obj, empties):
         _mark_synced(follow)
 
 
-def symmetry_axis(empties):
-    """The axis every handle and anchor of a rig is mirrored across or symmetric about (so a
-    symmetric mesh must stay symmetric), or "" when the rig is not symmetric."""
+def symmetry_axis(obj, empties, mirror_map):
+    """The local axis ("X", "Y", "Z") a rig of ``obj`` is symmetric about, or "": every handle and
+    anchor of ``empties`` was made mirrored across (or symmetric about) the same axis, or, for
+    an axis whose mesh symmetry (Edit Mode's X/Y/Z mirror toggle) is on, each one has a twin
+    across it or holds a vertex set that is its own mirror image. ``mirror_map(axis)`` gives the
+    mesh's (n,) mirror map (:func:`~..core.symmetry.mirror_map`)."""
+    if not empties:
+        return ""
     axes = {mirror_of(empty) for empty in empties}
-    return axes.pop() if len(axes) == 1 and "" not in axes and empties else ""
+    if len(axes) == 1 and "" not in axes:
+        return axes.pop()
+    for axis in AXES:
+        if not getattr(obj.data, f"use_mirror_{axis.lower()}", False):
+            continue
+        mapping = mirror_map(axis)
+        if all(mirror_of(e) == axis and twin_of(e) is not None or self_symmetric(e, mapping) for e in empties):
+            return axis
+    return ""
+
+
+def self_symmetric(empty, mapping):
+    """The handle's detail vertices are their own mirror image under ``mapping`` (n,)."""
+    ids = detail_ids_of(empty, mapping.size)
+    return ids.size > 0 and bool((mapping[ids] >= 0).all()) and np.array_equal(np.unique(mapping[ids]), np.unique(ids))
+
+
+def symmetric_motion(motion, axis):
+    """(4, 4) the rigid motion nearest to ``motion`` (4, 4) that commutes with the mirror across
+    ``axis``: the average with its mirror image, its linear part's nearest rotation (polar)."""
+    reflect = mirror_matrix(axis)
+    average = 0.5 * (motion + reflect @ motion @ reflect)
+    u, _, vt = np.linalg.svd(average[:3, :3])
+    if np.linalg.det(u @ vt) < 0:
+        u[:, -1] *= -1.0
+    out = average.copy()
+    out[:3, :3] = u @ vt
+    return out
+
+
+def keep_symmetric(obj, empties, axis):
+    """Put every self-symmetric handle (no twin) of a rig symmetric about ``axis`` on the nearest
+    symmetric motion (a move across the plane cannot keep the mesh symmetric); returns the
+    names of those it moved."""
+    moved = []
+    for empty in empties:
+        if kind_of(empty) != HANDLE or twin_of(empty) is not None:
+            continue
+        motion = local_motion(obj, empty)
+        symmetric = symmetric_motion(motion, axis)
+        if np.abs(symmetric - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()):
+            world = np.array(obj.matrix_world, dtype=np.float64) @ symmetric @ rest_local_of(empty)
+            empty.matrix_world = Matrix(world.tolist())
+            moved.append(empty.name)
+    return moved
 
 
 def _free_name(base):
