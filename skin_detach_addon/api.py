@@ -78,7 +78,8 @@ def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
     proxy with ``on_proxy=True``), or the members of vertex group ``group`` (weight above zero).
     Move, rotate or animate the empty, then :func:`deform`.
 
-    ``mirror`` ("X", "Y" or "Z", the mesh's local axis, as Blender's Mesh Symmetry): also make
+    ``mirror`` ("X", "Y" or "Z", the mesh's local axis, as Blender's Mesh Symmetry; None: the
+    first axis whose mesh symmetry toggle ``mesh.use_mirror_x/y/z`` is on; "": none): also make
     the mirrored twin from the vertices at the mirror images (refused, naming how many have
     none, when the mesh is not symmetric enough); moving either one moves both, mirrored. A
     selection that is its own mirror image makes one handle that keeps the rig symmetric. When
