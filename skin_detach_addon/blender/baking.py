@@ -259,8 +259,13 @@ class _FileWriter:
         self.apply_modifiers = bool(apply_modifiers)
 
     def write(self, frame, detail):
+        """Export to a hidden partial file beside the target, then rename it over the target: a
+        frame's file is complete or absent, whenever the process is stopped (a re-run replaces
+        it and its partial file)."""
         import bpy
         target = os.path.abspath(file_path(self.pattern, frame))
+        folder, name = os.path.split(target)
+        partial = os.path.join(folder, f".{name}.partial{os.path.splitext(name)[1]}")
         mesh_io.write_positions(self.obj.data, detail)
         view_layer = bpy.context.view_layer
         selected = [o for o in view_layer.objects if o.select_get()]
@@ -275,19 +280,20 @@ class _FileWriter:
                                       f"its collection is excluded") from None
             view_layer.objects.active = self.obj
             if target.lower().endswith(".obj"):
-                bpy.ops.wm.obj_export(filepath=target, check_existing=False, export_selected_objects=True,
+                bpy.ops.wm.obj_export(filepath=partial, check_existing=False, export_selected_objects=True,
                                       export_uv=True, export_materials=False,
                                       apply_modifiers=self.apply_modifiers)
             else:
-                bpy.ops.wm.ply_export(filepath=target, check_existing=False, export_selected_objects=True,
+                bpy.ops.wm.ply_export(filepath=partial, check_existing=False, export_selected_objects=True,
                                       export_uv=True, apply_modifiers=self.apply_modifiers)
         finally:
             self.obj.select_set(False)
             for o in selected:
                 o.select_set(True)
             view_layer.objects.active = active
-        if not os.path.isfile(target):
+        if not os.path.isfile(partial):
             raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
+        os.replace(partial, target)
         return target
 
     def undo(self):

@@ -109,6 +109,8 @@ class Deformation:
         :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail positions (a
         buffer the next call reuses)."""
         empties, result, groups = self._solve_proxy(tol, follow, budget_ms)
+        if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
+            self.binding.surface.forget_warm_start()
         detail = self.binding.rebuild(result.vertices, groups)
         axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly

@@ -395,6 +395,8 @@ class DualLaplacian:
         if self._lu is None:
             return DualLaplacianResult(points, 0, True, self.volume_change(points))
         if self.method == "rotated":
+            if initial is None:  # from rest, bit for bit the same whatever was solved before
+                self.energy_terms.reset()
             deadline = None if budget_ms is None else begun + budget_ms / 1000.0
             return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline)
         known = self._a_fixed @ fixed_points

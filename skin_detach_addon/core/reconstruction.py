@@ -72,6 +72,10 @@ class VertexSimilarities:
             self._cache[key] = (moments, norm, norm <= 0.0)
         return self._cache[key]
 
+    def reset(self):
+        """Start the next fit cold (see :meth:`.rotations.WarmRotations.reset`)."""
+        self._rotations.reset()
+
     def __call__(self, points, groups=None):
         moments, norm, lonely = self._operators(groups)
         covariance = np.stack([matrix @ points for matrix in moments], axis=2)
@@ -163,6 +167,10 @@ class Rebuild:
         normals = np.repeat(self._rest_normals, 3, axis=0)
         turned = np.einsum("nij,nj->ni", rotations[corner], normals)
         return turned * scales[corner][:, None]
+
+    def forget_warm_start(self):
+        """The next rebuild fits its frames cold: bit for bit the same whatever came before."""
+        self._similarities.reset()
 
     def _rebuild_rows(self, block, stacked, out):
         start, stop, rows = block

@@ -88,6 +88,10 @@ class RotatedEnergy:
         self.scale = float(np.sum(rest_rows * rest_rows))
         self._fit = WarmRotations()
 
+    def reset(self):
+        """Start the next rotation fit cold (see :meth:`.rotations.WarmRotations.reset`)."""
+        self._fit.reset()
+
     def covariance_rows(self, points):
         """(g, 9) C_g of ``points`` (m, 3), row g holding C_g[i, j] at 3 j + i."""
         stacked = self._moments @ points  # (3g, 3): row j g + k is column j of C_k

@@ -99,6 +99,11 @@ class WarmRotations:
     def __call__(self, covariance):
         return self.decompose(covariance)[0]
 
+    def reset(self):
+        """Forget the last eigenvectors: the next call is a cold one (bit for bit what a fresh
+        object gives, whatever was fitted before)."""
+        self._guess = None
+
     def decompose(self, covariance):
         """(R, U, V (r, 3, 3), sigma (r, 3)): R = U V^T and C = U diag(sigma) V^T with U, V proper
         rotations whose columns run from the largest singular value down (sigma_3 < 0 where

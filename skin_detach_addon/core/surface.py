@@ -241,6 +241,11 @@ class SkinDetachedSurface:
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
         return self._rebuild(points, out=out, groups=groups)
 
+    def forget_warm_start(self):
+        """The next :meth:`reconstruct` fits its frames cold: bit for bit the same result whatever
+        was rebuilt before (a bake frame does not depend on its chunk)."""
+        self._rebuild.forget_warm_start()
+
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
         every proxy triangle they are bound to. Moving these rigidly moves the detail vertices

@@ -1,0 +1,145 @@
+"""Bake a Skin Detach rig frame by frame: evaluate the (animated) handle empties at every frame
+of a range, rebuild the detail mesh and write it out.
+
+On a farm worker (Blender with the extension installed, no checkout):
+    blender -b scene.blend --python-expr "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()" -- ARGS
+From a checkout:     blender --background scene.blend --python scripts/bake.py -- ARGS
+With the bpy module: python scripts/bake.py --blend scene.blend ARGS
+
+ARGS:
+  --object NAME       the bound mesh (default: the only bound mesh in the file)
+  --frames 1-250      frames to bake: "1-250", "12" or "1-10,20" (default: the scene's range);
+                      split a long range across machines, each bakes its own part
+  --output PATH       "out/mesh_####.obj" or ".ply": one file per frame (#### = frame number,
+                      UVs kept; OBJ keeps the vertex order); or "baked.blend": the result saved
+                      in a copy of the scene, as shape keys (default) or one object per frame
+  --into shape-keys|objects   what goes into a .blend output
+  --apply-modifiers   export files with the object's modifiers applied
+  --no-volume         do not keep the volume of the proxy (default: kept, as in the panel)
+  --target-faces N    proxy size when the binding has to be built (default 1000)
+  --rebuild           build the binding again even if the file has one
+
+The binding saved in the file is reused; it is built only when the mesh has none but has
+handles (a file from an older version). Re-running gives the same output. Exits 0 on success,
+1 with a one-line message on failure (missing object, no binding and no handles, unwritable
+output, ...), 2 on bad arguments.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog="skin-detach-bake", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--blend", help="the .blend to open (bpy-module use; Blender opens it itself)")
+    parser.add_argument("--object", help="name of the bound mesh object")
+    parser.add_argument("--frames", help="frames: 1-250, 12 or 1-10,20 (default: the scene's range)")
+    parser.add_argument("--output", required=True, help="out/mesh_####.obj, out/mesh_####.ply or baked.blend")
+    parser.add_argument("--into", choices=("shape-keys", "objects"), default="shape-keys")
+    parser.add_argument("--apply-modifiers", action="store_true")
+    parser.add_argument("--no-volume", action="store_true")
+    parser.add_argument("--target-faces", type=int, default=1000)
+    parser.add_argument("--rebuild", action="store_true")
+    return parser.parse_args(argv)
+
+
+def script_argv():
+    """Arguments for this script: after ``--`` inside Blender, all of them with the bpy module."""
+    return sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+
+
+class BakeFailed(Exception):
+    pass
+
+
+def find_object(bpy, api, name):
+    if name:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            raise BakeFailed(f"--object: expected an object of the file, got {name!r} (objects: "
+                             f"{', '.join(sorted(o.name for o in bpy.data.objects if o.type == 'MESH')) or 'none'})")
+        mesh = api.mesh_of(obj)  # a proxy or a handle stands for its mesh
+        if mesh is None or mesh.type != 'MESH':
+            raise BakeFailed(f"--object: expected a mesh object (or its proxy or a handle), got {name!r} of type "
+                             f"{obj.type}")
+        if mesh != obj:
+            print(f"bake: {name!r} belongs to {mesh.name!r}; baking that mesh", flush=True)
+        return mesh
+    bound = api.bound_objects()
+    if len(bound) != 1:
+        raise BakeFailed(f"--object: expected one bound mesh in the file to pick, found {len(bound)} "
+                         f"({', '.join(o.name for o in bound) or 'none'}); name it with --object")
+    return bound[0]
+
+
+def ensure_binding(api, obj, args):
+    """Reuse the stored binding; build it when missing (or asked) and the rig has handles."""
+    if api.is_bound(obj) and not args.rebuild:
+        return False
+    if not api.handles_of(obj):
+        raise BakeFailed(f"object {obj.name!r}: expected a Skin Detach binding or handles to build one from, "
+                         f"it has neither; set the rig up in Blender first")
+    print(f"bake: building the binding of {obj.name!r} ({args.target_faces} proxy faces)", flush=True)
+    api.build(obj, target_faces=args.target_faces)
+    return True
+
+
+def run(args):
+    import bpy
+
+    from .. import api
+
+    if args.blend:
+        if not os.path.isfile(args.blend):
+            raise BakeFailed(f"--blend: expected an existing .blend file, got {args.blend!r}")
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    source = bpy.data.filepath
+    if source and os.path.exists(args.output) and os.path.samefile(args.output, source):
+        raise BakeFailed(f"--output: expected a file other than the source .blend, got {args.output!r} (it would "
+                         f"overwrite the source)")
+    scene = bpy.context.scene
+    obj = find_object(bpy, api, args.object)
+    if bpy.context.view_layer.objects.active is None:
+        bpy.context.view_layer.objects.active = obj
+    to_blend = args.output.lower().endswith(".blend")
+    if to_blend:
+        api.check_output_file("--output", args.output)
+    frames = api.frame_list(args.frames or f"{scene.frame_start}-{scene.frame_end}")  # refused before any work
+    built = ensure_binding(api, obj, args)
+    into = {"shape-keys": api.SHAPE_KEYS, "objects": api.OBJECTS}[args.into] if to_blend else api.FILES
+    start = time.perf_counter()
+
+    def progress(done, total, record):
+        warning = "" if record["converged"] else f" (warning: the solve did not converge in {record['iterations']} iterations)"
+        print(f"bake: frame {record['frame']} ({done}/{total}) solved in {record['milliseconds']:.1f} ms "
+              f"-> {record['output']}{warning}", flush=True)
+
+    records = api.bake(obj, frames, into=into, path=None if to_blend else args.output,
+                       preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress)
+    if to_blend:
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.output), copy=True)
+    seconds = time.perf_counter() - start
+    print(f"bake: {len(records)} frames of {obj.name!r} ({len(obj.data.vertices):,} vertices) in {seconds:.1f} s"
+          f"{' (binding built first)' if built else ''}; wrote {args.output}", flush=True)
+
+
+def main(argv=None):
+    """Run the bake with ``argv`` (default: the command line's, after ``--`` inside Blender);
+    exits 1 with a one-line message on failure, 2 on bad arguments."""
+    args = parse_args(script_argv() if argv is None else argv)
+    try:
+        import bpy  # noqa: F401  (first: the bpy module makes mathutils importable)
+
+        from ..api import SkinDetachError
+        try:
+            run(args)
+        except (SkinDetachError, BakeFailed) as exc:
+            raise BakeFailed(str(exc)) from None
+        except RuntimeError as exc:  # a Blender operator's error report
+            raise BakeFailed(str(exc).strip()) from None
+    except BakeFailed as exc:
+        print(f"bake: error: {exc}", file=sys.stderr, flush=True)
+        sys.exit(1)
