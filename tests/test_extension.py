@@ -46,12 +46,19 @@ print("installed extension works")
 '''
 
 
-def test_linux_zip_builds_validates_installs_and_runs(tmp_path):
+@pytest.fixture(scope="module")
+def extension_zip(tmp_path_factory):
+    """(path of the built linux-x64 zip, the build's folder)."""
+    folder = tmp_path_factory.mktemp("extension")
     build = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--platforms", "linux-x64",
-                            "--out", str(tmp_path / "dist"), "--wheels", str(tmp_path / "wheels")],
+                            "--out", str(folder / "dist"), "--wheels", str(folder / "wheels")],
                            capture_output=True, text=True, timeout=1200)
     assert build.returncode == 0, build.stderr
-    zips = list((tmp_path / "dist").glob("*.zip"))
+    return list((folder / "dist").glob("*.zip")), folder
+
+
+def test_linux_zip_builds_validates_installs_and_runs(extension_zip, tmp_path):
+    zips, _ = extension_zip
     assert [z.name for z in zips] == ["skin_detach_addon-0.1.0-linux_x64.zip"]
     with zipfile.ZipFile(zips[0]) as archive:
         names = archive.namelist()
@@ -74,3 +81,74 @@ def test_build_refuses_unknown_platforms(tmp_path):
     run = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--platforms", "amiga",
                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and "--platforms" in run.stderr
+
+
+#: A stand-in for Blender's command line on a farm worker, ``blender -b FILE --python-expr EXPR
+#: -- ARGS``, with the bpy module: it enables the installed extension (as Blender does at start),
+#: opens FILE and runs EXPR; the repository is not on the path.
+BLENDER_STAND_IN = r'''
+import sys
+import bpy
+import addon_utils
+
+assert sys.argv[1] == "-b" and sys.argv[3] == "--python-expr", sys.argv
+addon_utils.enable("bl_ext.user_default.skin_detach_addon", default_set=True)
+bpy.ops.wm.open_mainfile(filepath=sys.argv[2])
+exec(sys.argv[4])
+assert "skin_detach_addon" not in sys.modules, "the repository copy was imported"
+'''
+
+MAKE_RIG = r'''
+import sys
+import numpy as np
+import bpy
+
+bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
+from bl_ext.user_default.skin_detach_addon import api
+bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+obj = bpy.context.active_object
+api.build(obj, target_faces=150)
+z = np.array([v.co.z for v in obj.data.vertices])
+api.add_anchor(obj, np.flatnonzero(z < -0.7))
+handle = api.add_handle(obj, np.flatnonzero(z > 0.7))
+for frame, (x, angle) in ((1, (0.0, 0.0)), (30, (0.6, 0.8))):
+    handle.location.x, handle.rotation_euler.y = x, angle
+    handle.keyframe_insert("location", frame=frame)
+    handle.keyframe_insert("rotation_euler", frame=frame)
+bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 30
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+'''
+
+
+def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(extension_zip, tmp_path):
+    pytest.importorskip("openjd")
+    openjd = pathlib.Path(sys.executable).parent / "openjd"
+    zips, _ = extension_zip
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
+    (tmp_path / "make_rig.py").write_text(MAKE_RIG)
+    made = subprocess.run([sys.executable, str(tmp_path / "make_rig.py"), str(zips[0]), str(tmp_path / "rig.blend")],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert made.returncode == 0, made.stdout[-2000:] + made.stderr[-2000:]
+    stand_in = tmp_path / "bin" / "blender"
+    stand_in.parent.mkdir()
+    stand_in.write_text(f"#!{sys.executable}\n" + BLENDER_STAND_IN)
+    stand_in.chmod(0o755)
+    template = ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"
+    check = subprocess.run([str(openjd), "check", str(template)], capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0, check.stdout + check.stderr
+    run = subprocess.run([str(openjd), "run", str(template), "-p", f"BlendFile={tmp_path / 'rig.blend'}",
+                          "-p", f"OutputPattern={tmp_path / 'farm' / 'f_####.obj'}", "-p", "Frames=1-30",
+                          "-p", "ChunkSize=4", "-p", f"BlenderExecutable={stand_in}"],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
+    assert "Chunks run: 8" in run.stdout and run.stdout.count("bake: error") == 0
+    one = subprocess.run([str(stand_in), "-b", str(tmp_path / "rig.blend"), "--python-expr",
+                          "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()", "--",
+                          "--frames", "1-30", "--output", str(tmp_path / "one" / "f_####.obj")],
+                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert one.returncode == 0, one.stdout[-2000:] + one.stderr[-2000:]
+    farm = {p.name: p.read_bytes() for p in (tmp_path / "farm").iterdir()}
+    single = {p.name: p.read_bytes() for p in (tmp_path / "one").iterdir()}
+    assert sorted(farm) == [f"f_{k:04d}.obj" for k in range(1, 31)]
+    assert farm == single

@@ -14,8 +14,9 @@ ARGS:
                       UVs kept; OBJ keeps the vertex order); or "baked.blend": the result saved
                       in a copy of the scene, as shape keys (default) or one object per frame
   --into shape-keys|objects   what goes into a .blend output
-  --apply-modifiers   export files with the object's modifiers applied
-  --no-volume         do not keep the volume of the proxy (default: kept, as in the panel)
+  --apply-modifiers   export files with the object's modifiers applied (or --modifiers apply|ignore)
+  --no-volume         do not keep the volume of the proxy (default: kept, as in the panel; or
+                      --volume keep|free)
   --target-faces N    proxy size when the binding has to be built (default 1000)
   --rebuild           build the binding again even if the file has one
 
@@ -41,9 +42,15 @@ def parse_args(argv):
     parser.add_argument("--into", choices=("shape-keys", "objects"), default="shape-keys")
     parser.add_argument("--apply-modifiers", action="store_true")
     parser.add_argument("--no-volume", action="store_true")
+    # The same two choices as values, for job templates that cannot leave an argument out.
+    parser.add_argument("--modifiers", choices=("apply", "ignore"), help="apply = --apply-modifiers")
+    parser.add_argument("--volume", choices=("keep", "free"), help="free = --no-volume")
     parser.add_argument("--target-faces", type=int, default=1000)
     parser.add_argument("--rebuild", action="store_true")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    args.apply_modifiers = args.apply_modifiers or args.modifiers == "apply"
+    args.no_volume = args.no_volume or args.volume == "free"
+    return args
 
 
 def script_argv():
