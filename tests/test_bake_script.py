@@ -105,3 +105,23 @@ def test_the_add_on_module_runs_the_same_bake(rig_file, tmp_path):
     assert run.returncode == 0, run.stderr
     reference = bake("--blend", rig_file, "--frames", "2", "--output", tmp_path / "r_####.obj")
     assert (tmp_path / "m_0002.obj").read_bytes() == (tmp_path / "r_0002.obj").read_bytes()
+
+
+def test_a_bake_killed_mid_frame_leaves_only_complete_files(rig_file, tmp_path):
+    import time
+    target = tmp_path / "killed"
+    process = subprocess.Popen([sys.executable, str(BAKE), "--blend", str(rig_file), "--frames", "1-4,1-4",
+                                "--output", str(target / "k_####.obj")], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (target.exists() and any(target.iterdir())):
+        time.sleep(0.005)
+    process.kill()
+    process.wait()
+    reference = bake("--blend", rig_file, "--frames", "1-4", "--output", tmp_path / "whole" / "k_####.obj")
+    assert reference.returncode == 0, reference.stderr
+    whole = {p.name: p.read_bytes() for p in (tmp_path / "whole").iterdir()}
+    visible = [p for p in target.iterdir() if not p.name.startswith(".")]
+    assert all(p.read_bytes() == whole[p.name] for p in visible)  # complete, or not there at all
+    again = bake("--blend", rig_file, "--frames", "1-4", "--output", target / "k_####.obj")
+    assert again.returncode == 0 and {p.name: p.read_bytes() for p in target.iterdir()} == whole

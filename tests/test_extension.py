@@ -83,7 +83,7 @@ def test_build_refuses_unknown_platforms(tmp_path):
     assert run.returncode == 2 and "--platforms" in run.stderr
 
 
-#: A stand-in for Blender's command line on a farm worker, ``blender -b FILE --python-expr EXPR
+#: A stand-in for Blender's command line on a farm worker, ``blender -b [-y] FILE --python-expr EXPR
 #: -- ARGS``, with the bpy module: it enables the installed extension (as Blender does at start),
 #: opens FILE and runs EXPR; the repository is not on the path.
 BLENDER_STAND_IN = r'''
@@ -91,10 +91,11 @@ import sys
 import bpy
 import addon_utils
 
-assert sys.argv[1] == "-b" and sys.argv[3] == "--python-expr", sys.argv
+args = [a for a in sys.argv[1:sys.argv.index("--")] if a not in ("-b", "-y")]
+assert len(args) == 3 and args[1] == "--python-expr", sys.argv
 addon_utils.enable("bl_ext.user_default.skin_detach_addon", default_set=True)
-bpy.ops.wm.open_mainfile(filepath=sys.argv[2])
-exec(sys.argv[4])
+bpy.ops.wm.open_mainfile(filepath=args[0])
+exec(args[2])
 assert "skin_detach_addon" not in sys.modules, "the repository copy was imported"
 '''
 
@@ -107,6 +108,7 @@ bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_defaul
 from bl_ext.user_default.skin_detach_addon import api
 bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
 obj = bpy.context.active_object
+obj.name = "scan"
 api.build(obj, target_faces=150)
 z = np.array([v.co.z for v in obj.data.vertices])
 api.add_anchor(obj, np.flatnonzero(z < -0.7))
@@ -119,32 +121,43 @@ bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 30
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
 '''
 
+BAKE_EXPR = "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()"
 
-def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(extension_zip, tmp_path):
-    pytest.importorskip("openjd")
-    openjd = pathlib.Path(sys.executable).parent / "openjd"
+
+@pytest.fixture(scope="module")
+def worker(extension_zip, tmp_path_factory):
+    """A farm worker's set-up: the extension installed in its own Blender user folder, a saved rig
+    (a sphere whose handle moves and turns over frames 1-30) and a ``blender`` stand-in. Returns
+    (folder, environment, the stand-in's path, the rig's path)."""
     zips, _ = extension_zip
+    folder = tmp_path_factory.mktemp("worker")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    env["BLENDER_USER_RESOURCES"] = str(tmp_path / "user")
-    (tmp_path / "make_rig.py").write_text(MAKE_RIG)
-    made = subprocess.run([sys.executable, str(tmp_path / "make_rig.py"), str(zips[0]), str(tmp_path / "rig.blend")],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    env["BLENDER_USER_RESOURCES"] = str(folder / "user")
+    (folder / "make_rig.py").write_text(MAKE_RIG)
+    made = subprocess.run([sys.executable, str(folder / "make_rig.py"), str(zips[0]), str(folder / "rig.blend")],
+                          cwd=folder, env=env, capture_output=True, text=True, timeout=600)
     assert made.returncode == 0, made.stdout[-2000:] + made.stderr[-2000:]
-    stand_in = tmp_path / "bin" / "blender"
+    stand_in = folder / "bin" / "blender"
     stand_in.parent.mkdir()
     stand_in.write_text(f"#!{sys.executable}\n" + BLENDER_STAND_IN)
     stand_in.chmod(0o755)
+    return folder, env, stand_in, folder / "rig.blend"
+
+
+def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(worker, tmp_path):
+    pytest.importorskip("openjd")
+    openjd = pathlib.Path(sys.executable).parent / "openjd"
+    _, env, stand_in, rig = worker
     template = ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"
     check = subprocess.run([str(openjd), "check", str(template)], capture_output=True, text=True, timeout=120)
     assert check.returncode == 0, check.stdout + check.stderr
-    run = subprocess.run([str(openjd), "run", str(template), "-p", f"BlendFile={tmp_path / 'rig.blend'}",
+    run = subprocess.run([str(openjd), "run", str(template), "-p", f"BlendFile={rig}",
                           "-p", f"OutputPattern={tmp_path / 'farm' / 'f_####.obj'}", "-p", "Frames=1-30",
                           "-p", "ChunkSize=4", "-p", f"BlenderExecutable={stand_in}"],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert "Chunks run: 8" in run.stdout and run.stdout.count("bake: error") == 0
-    one = subprocess.run([str(stand_in), "-b", str(tmp_path / "rig.blend"), "--python-expr",
-                          "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()", "--",
+    one = subprocess.run([str(stand_in), "-b", str(rig), "--python-expr", BAKE_EXPR, "--",
                           "--frames", "1-30", "--output", str(tmp_path / "one" / "f_####.obj")],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert one.returncode == 0, one.stdout[-2000:] + one.stderr[-2000:]
@@ -152,3 +165,26 @@ def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(extens
     single = {p.name: p.read_bytes() for p in (tmp_path / "one").iterdir()}
     assert sorted(farm) == [f"f_{k:04d}.obj" for k in range(1, 31)]
     assert farm == single
+
+
+def test_the_flamenco_job_types_command_runs_on_a_worker_with_only_the_extension(worker, tmp_path):
+    import json
+    import shutil
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("no node to run the Flamenco job compiler stand-in")
+    _, env, stand_in, rig = worker
+    settings = {"frames": "1-250", "chunk_size": 10, "object": "scan", "output_folder": str(tmp_path / "bake"),
+                "format": ".obj", "apply_modifiers": False, "preserve_volume": True, "blendfile": str(rig)}
+    compiled = subprocess.run([node, str(ROOT / "tests" / "farm" / "flamenco_stand_in.js"),
+                               str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings), "s010"],
+                              capture_output=True, text=True, timeout=60)
+    assert compiled.returncode == 0, compiled.stderr
+    tasks = json.loads(compiled.stdout)
+    assert len(tasks) == 25
+    command = tasks[0]["commands"][0]["parameters"]
+    # The Worker runs: exe exeArgs argsBefore blendfile args, with {blender} and {blenderArgs} expanded.
+    line = [str(stand_in), "-b", "-y", *command["argsBefore"], command["blendfile"], *command["args"]]
+    run = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert sorted(p.name for p in (tmp_path / "bake").iterdir()) == [f"s010_rig_{k:04d}.obj" for k in range(1, 11)]
