@@ -264,10 +264,14 @@ def preview_of(obj):
     return preview
 
 
+def _has_stand_in_record(obj):
+    return has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY]
+
+
 def preview_stands_in(obj):
     """The preview object stands in for the mesh ``obj``: the add-on hid the mesh in viewports
     and recorded its own state (a record on a visible mesh is stale: from an older file)."""
-    return has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY] and bool(obj.hide_viewport)
+    return _has_stand_in_record(obj) and bool(obj.hide_viewport)
 
 
 def record_stand_in(obj, preview):
@@ -284,7 +288,7 @@ def end_stand_in(obj):
         preview.hide_viewport = True
     if preview_stands_in(obj):
         obj.hide_viewport = bool(obj[KEY]["mesh_hidden"])
-    if has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY]:
+    if _has_stand_in_record(obj):
         del obj[KEY]["mesh_hidden"]
 
 

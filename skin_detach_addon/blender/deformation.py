@@ -90,8 +90,8 @@ class Deformation:
         return handles.handles_of(self.obj, self.proxy)
 
     def _solve_proxy(self, tol, follow=False, budget_ms=None):
-        """(empties, :class:`DualLaplacianResult`, rigid groups (m,)) from the handles' transforms
-        (``follow``, ``budget_ms``: see :meth:`Binding.solve_proxy`)."""
+        """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, rigid groups (m,)) from the
+        handles' transforms (``follow``, ``budget_ms``: see :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
         axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
@@ -101,18 +101,17 @@ class Deformation:
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        return empties, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms), groups
+        return axis, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms), groups
 
     def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None):
         """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
         last solves, within ``budget_ms``) and rebuild without writing anything. Returns the
         :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail positions (a
         buffer the next call reuses)."""
-        empties, result, groups = self._solve_proxy(tol, follow, budget_ms)
+        axis, result, groups = self._solve_proxy(tol, follow, budget_ms)
         if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
             self.binding.surface.forget_warm_start()
         detail = self.binding.rebuild(result.vertices, groups)
-        axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return result, detail
