@@ -110,11 +110,12 @@ def core_drag(surface, scenario, steps):
 
 def blender_drag(obj, handle, scenario, steps):
     """Median ms of ``steps`` handle moves along the bend, each solved, written back and
-    evaluated (the modal drag's path: the binding opened once); the last pose is settled."""
+    evaluated (the modal drag's path: the binding opened once, every step follows the last one
+    within the drag's budget); the last pose is settled as the confirm does."""
     import bpy
     from mathutils import Matrix
 
-    from skin_detach_addon.blender.deformation import Deformation
+    from skin_detach_addon.blender.deformation import DRAG_BUDGET_MS, Deformation
     deformation = Deformation(obj)
     rest_world = np.array(handle.matrix_world)
     times = []
@@ -122,10 +123,10 @@ def blender_drag(obj, handle, scenario, steps):
         handle.matrix_world = Matrix((scenario.motion(k / steps) @ rest_world).tolist())
         start = time.perf_counter()
         bpy.context.view_layer.update()
-        deformation.step(DRAG_TOL)
+        deformation.step(DRAG_TOL, mark=False, follow=True, budget_ms=DRAG_BUDGET_MS)
         bpy.context.view_layer.update()
         times.append(time.perf_counter() - start)
-    deformation.step()
+    deformation.step(follow=True)
     return median_ms(times)
 
 

@@ -1,11 +1,14 @@
 """The proxy solve's energy derivatives and its Newton iteration: exact Hessian products, the
 certified stop, the per-move budget, and a start from rest that forgets what came before."""
 
+import time
+
 import numpy as np
 import pytest
 
 from conftest import diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
+from skin_detach_addon.core.hessian_factor import HessianFactor, LaggedHessian
 from shapes import bend_constraints as bend
 
 
@@ -86,3 +89,37 @@ def test_crease_count_is_zero_at_rest_and_counts_a_fold():
     right = folded[:, 0] > 0.5 * (folded[:, 0].min() + folded[:, 0].max())
     folded[right, 2] = folded[right, 0] - 0.5 * (folded[:, 0].min() + folded[:, 0].max())
     assert creases(points, folded, tris) > 0
+
+
+def test_the_assembled_hessian_is_the_hessian_products_and_its_factor_solves_them(spot_proxy):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    bent = solver.solve(targets, max_iter=100, tol=1e-12).vertices
+    energy, free = solver.energy_terms, solver.free
+    hessian = HessianFactor(energy, free, points.shape[0])
+    state = energy.at(bent)
+    direction = np.zeros_like(points)
+    direction[free] = np.random.default_rng(4).standard_normal((free.size, 3))
+    product = energy.hessian_product(state, direction)[free]
+    assembled = (hessian.matrix(state) @ direction[free].ravel()).reshape(-1, 3)
+    assert np.abs(assembled - product).max() <= 1e-12 * np.abs(product).max()
+    factored = hessian.factor(state)  # at a minimum: positive definite
+    assert factored is not None
+    assert np.abs(factored.solve(product) - direction[free]).max() <= 1e-8 * np.abs(direction).max()
+
+
+def test_a_factor_asked_for_in_the_background_is_taken_up_and_a_reset_forgets_it(spot_proxy):
+    points, tris = spot_proxy
+    ids, _ = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    lagged = LaggedHessian(HessianFactor(solver.energy_terms, solver.free, points.shape[0]))
+    assert lagged.solver() is None
+    lagged.refresh(solver.energy_terms.at(points))
+    deadline = time.perf_counter() + 30.0
+    while lagged.solver() is None and time.perf_counter() < deadline:
+        time.sleep(0.01)
+    residual = np.ones((solver.free.size, 3))
+    assert lagged.solver() is not None and np.all(np.isfinite(lagged.solver()(residual)))
+    lagged.reset()
+    assert lagged.solver() is None

@@ -45,6 +45,7 @@ from scipy.sparse.linalg import splu
 
 from .errors import SkinDetachError
 from .geometry import barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, unique_edges, unit_rows
+from .hessian_factor import HessianFactor, LaggedHessian
 from .projected_newton import largest_step, minimise
 from .rotated_energy import RotatedEnergy
 from .validation import as_points, as_triangles, as_vertex_ids
@@ -243,6 +244,8 @@ class DualLaplacian:
         self._frame_coords = np.stack([np.einsum("ij,ij->i", offset, e) for e in (e1, e2, n)], axis=1)
 
         self.matrix = self._assemble(centroid, weights)
+        #: "rotated": the factored Hessian preconditioning the Newton steps, made on the first solve.
+        self._lagged = None
         if method == "rotated":
             self._setup_rotated(centroid, m)
         else:
@@ -371,8 +374,9 @@ class DualLaplacian:
         whatever was solved before); ``initial`` (m, 3), e.g. the extrapolated previous moves of a
         drag, starts it there instead. "rotated": converged when the Newton step's largest vertex
         move, squared over the squared diagonal, is at most ``tol`` (:mod:`.projected_newton`);
-        ``budget_ms`` (None: no limit) stops it after the iteration that ends past that many
-        milliseconds (not converged: the next call may continue from its result). "paper": stops
+        ``budget_ms`` (None: no limit) stops it before an iteration that, taking as long as the
+        last, would end past that many milliseconds (not converged: the next call may continue
+        from its result; the first iteration always runs). "paper": stops
         when the largest squared move of a vertex in one iteration is at most ``tol``, or when
         :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
@@ -395,8 +399,11 @@ class DualLaplacian:
         if self._lu is None:
             return DualLaplacianResult(points, 0, True, self.volume_change(points))
         if self.method == "rotated":
+            if self._lagged is None:
+                self._lagged = LaggedHessian(HessianFactor(self.energy_terms, self.free, self.rest.shape[0]))
             if initial is None:  # from rest, bit for bit the same whatever was solved before
                 self.energy_terms.reset()
+                self._lagged.reset()
             deadline = None if budget_ms is None else begun + budget_ms / 1000.0
             return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline)
         known = self._a_fixed @ fixed_points
@@ -470,9 +477,9 @@ class DualLaplacian:
         for stage in range(1, stages):
             points[self.fixed] = start + (stage / stages) * (fixed_points - start)
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter, deadline)
+                              STAGE_TOL, max_iter, deadline, self._lagged)
             points = staged.points
-            if deadline is not None and time.perf_counter() > deadline:
+            if deadline is not None and not staged.converged:
                 # Out of budget: the handles where they belong, the rest where the stages got to; the
                 # next call goes on from there.
                 points[self.fixed] = fixed_points
@@ -480,7 +487,7 @@ class DualLaplacian:
                                            staged.history, staged.energy)
         points[self.fixed] = fixed_points
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
-                          max_iter, deadline)
+                          max_iter, deadline, self._lagged)
         return DualLaplacianResult(result.points, result.iterations, result.converged,
                                    self.volume_change(result.points), result.history, result.energy)
 

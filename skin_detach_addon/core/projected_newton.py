@@ -7,12 +7,14 @@ move (the others are held at their given positions); every step is an (f, 3) arr
 Minimises E(X) (:class:`.rotated_energy.RotatedEnergy`) over the free vertices subject to every
 kept closed component keeping its rest volume (:class:`.volume_constraint.VolumeConstraint`).
 Each iteration solves the Newton system of the Lagrangian, H_L p = -(grad E + sum_s lambda_s
-grad V_s) on the constraint's tangent space, by conjugate gradients preconditioned with K^-1 (the
-factor of the energy's quadratic part, held by the caller) projected onto the tangent space
-(projected preconditioned CG); the multipliers are the least-squares ones in the K^-1 metric. CG
+grad V_s) on the constraint's tangent space, by conjugate gradients preconditioned with P^-1
+projected onto the tangent space (projected preconditioned CG); the multipliers are the
+least-squares ones in the P^-1 metric. P is the energy's Hessian factored at a recent iterate
+(:class:`.hessian_factor.LaggedHessian`, when it is positive definite there) or else K (the
+factor of the energy's quadratic part, held by the caller). CG
 stops at the relative residual :data:`FORCING` or on negative curvature (then the step so far, or
 the preconditioned gradient, is still a descent direction). A backtracking line search on E
-(after restoring the volumes along K^-1 grad V) accepts a step only when E has not risen, by the
+(after restoring the volumes along P^-1 grad V) accepts a step only when E has not risen, by the
 Armijo rule, so E never rises from one iterate to the next.
 
 Convergence (the certificate): the distance to the stationary point is estimated by the Newton
@@ -28,10 +30,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: CG stops when its residual (in the K^-1 metric) is this fraction of the gradient's ...
+#: CG stops when its residual (in the P^-1 metric) is this fraction of the gradient's ...
 FORCING = 0.05
 #: ... or after this many iterations.
 CG_ITERATIONS = 200
+#: In a solve with a deadline, more CG steps than this ask for a new factor of the Hessian, made on
+#: the thread pool (free for the drag's moves; made at once it would cost about 15 CG steps at
+#: 1,000 faces and 25 at 5,000, more than it saves in a settle).
+REFRESH_STEPS = 4
 #: Armijo's sufficient decrease, and the halvings of the step at most.
 ARMIJO = 1e-4
 BACKTRACKS = 20
@@ -57,15 +63,15 @@ def largest_step(step, diagonal):
 
 class _Tangent:
     """The volume constraint seen from the free vertices at one iterate: its gradients ``a`` (f, 3),
-    ``d`` = K^-1 a, and the projection of K^-1-preconditioned vectors onto the tangent space."""
+    ``d`` = P^-1 a, and the projection of P^-1-preconditioned vectors onto the tangent space."""
 
-    def __init__(self, volume, points, free, solve_k):
+    def __init__(self, volume, points, free, solve_p):
         self.volume = volume
         self.free = free
         self.slot = volume.slot[free]
         self.mask = volume.in_kept[free]
         self.a = volume.gradient(points)[free] * self.mask[:, None]
-        self.d = solve_k(self.a)
+        self.d = solve_p(self.a)
         self.ad = self._sums(np.einsum("ij,ij->i", self.a, self.d))
         self.ad = np.where(np.abs(self.ad) > 1e-300, self.ad, 1.0)
 
@@ -73,11 +79,11 @@ class _Tangent:
         return np.bincount(self.slot[self.mask], weights=values[self.mask], minlength=self.volume.size)
 
     def coefficients(self, y):
-        """(c,) per component, a . y / a . d: the share of K^-1 a in ``y`` (f, 3)."""
+        """(c,) per component, a . y / a . d: the share of P^-1 a in ``y`` (f, 3)."""
         return self._sums(np.einsum("ij,ij->i", self.a, y)) / self.ad
 
     def project(self, y):
-        """``y`` (f, 3), a K^-1-preconditioned vector, less its part along d: a . result = 0."""
+        """``y`` (f, 3), a P^-1-preconditioned vector, less its part along d: a . result = 0."""
         return y - (self.coefficients(y)[self.slot] * self.mask)[:, None] * self.d
 
     def direction(self, m):
@@ -87,11 +93,16 @@ class _Tangent:
         return out
 
 
-def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None):
+def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None, lagged=None):
     """Projected Newton (module docstring) from ``points`` (m, 3), whose free rows are the start
     and whose other rows are held. ``volume``: a VolumeConstraint with at least one kept component,
     or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``deadline``: a
-    time.perf_counter() value after which no further iteration starts. Returns :class:`NewtonResult`."""
+    time.perf_counter() value no iteration should end after (one that would, taking as long as
+    the last, is not started; the first always runs); ``lagged``: a
+    :class:`.hessian_factor.LaggedHessian` whose factor preconditions instead of K's when it has
+    one; with a deadline, it is refreshed on the thread pool at the iterate after CG needed more
+    than :data:`REFRESH_STEPS` steps (without one, the solve never asks for a factor, so it is a
+    function of its start and the factor it is given). Returns :class:`NewtonResult`."""
     x = points.copy()
     m = x.shape[0]
     if volume is not None:
@@ -99,11 +110,18 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
     state = energy.at(x)
     history, energies = [], [state.energy]
     converged, iterations = False, 0
+    stale = False
     for iterations in range(1, max_iter + 1):
-        tangent = _Tangent(volume, x, free, solve_k) if volume is not None else None
+        begun = time.perf_counter()
+        solve_p = solve_k
+        if lagged is not None:
+            if stale:
+                lagged.refresh(state)
+            solve_p = lagged.solver() or solve_k
+        tangent = _Tangent(volume, x, free, solve_p) if volume is not None else None
         gradient = state.gradient[free]
         if tangent is not None:
-            multipliers = -tangent.coefficients(solve_k(gradient))
+            multipliers = -tangent.coefficients(solve_p(gradient))
             gradient = gradient + (multipliers[tangent.slot] * tangent.mask)[:, None] * tangent.a
 
         def hessian(p):
@@ -115,17 +133,19 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             return out[free]
 
         def precondition(r):
-            y = solve_k(r)
+            y = solve_p(r)
             return y if tangent is None else tangent.project(y)
 
-        step, negative = _newton_step(hessian, precondition, gradient)
+        step, negative, steps = _newton_step(hessian, precondition, gradient)
+        # A Hessian with negative curvature would not factor positive definite: no refresh then.
+        stale = deadline is not None and lagged is not None and not negative and steps > REFRESH_STEPS
         proposed = largest_step(step, diagonal)
         slope = float(np.sum(gradient * step))
         if slope >= 0.0 or not np.isfinite(slope):
             converged = not negative and proposed <= tol
             iterations -= 1
             break
-        # Backtracking on E from the full step; volumes restored along K^-1 grad V at x.
+        # Backtracking on E from the full step; volumes restored along P^-1 grad V at x.
         direction = tangent.direction(m) if tangent is not None else None
         length, accepted = 1.0, None
         for _ in range(BACKTRACKS):
@@ -151,14 +171,15 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
         if not negative and length == 1.0 and moved <= tol:
             converged = True
             break
-        if deadline is not None and time.perf_counter() > deadline:
+        now = time.perf_counter()
+        if deadline is not None and now + (now - begun) > deadline:  # the next one would end past it
             break
     return NewtonResult(x, iterations, converged, history, energies)
 
 
 def _newton_step(hessian, precondition, gradient):
     """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients.
-    Returns (p, whether negative curvature was met)."""
+    Returns (p, whether negative curvature was met, the number of Hessian products)."""
     residual = -gradient
     z = precondition(residual)
     rz = float(np.sum(residual * z))
@@ -167,6 +188,7 @@ def _newton_step(hessian, precondition, gradient):
     direction = z
     negative = False
     for k in range(CG_ITERATIONS):
+        steps = k + 1
         product = hessian(direction)
         curvature = float(np.sum(direction * product))
         if curvature <= 0.0:
@@ -183,4 +205,4 @@ def _newton_step(hessian, precondition, gradient):
             break
         direction = z + (rz_next / rz) * direction
         rz = rz_next
-    return step, negative
+    return step, negative, steps

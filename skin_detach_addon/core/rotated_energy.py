@@ -88,6 +88,10 @@ class RotatedEnergy:
         self.scale = float(np.sum(rest_rows * rest_rows))
         self._fit = WarmRotations()
 
+    def moments_coo(self):
+        """(3g, m) COO: entry (j g + k, v) is mu_kv[j], the weight of vertex v in column j of C_k."""
+        return self._moments.tocoo()
+
     def reset(self):
         """Start the next rotation fit cold (see :meth:`.rotations.WarmRotations.reset`)."""
         self._fit.reset()

@@ -1,0 +1,121 @@
+"""The energy's Hessian over the free vertices, assembled and factored: the preconditioner of the
+Newton iteration.
+
+Arrays: ``free`` (f,) the ids of the vertices that move; vectors over them are (f, 3), and the
+matrix is (3f, 3f) in that layout, row 3 i + c for coordinate c of free vertex i.
+
+    H = 2 (K kron I_3 - Q^T diag(w) Q),
+
+K = B^T B, and row (g, k) of Q (3g, 3f) the map D -> <t_gk, C_g(D)> of twist k of group g, w its
+weight 1 / (sigma_a + sigma_b) (:mod:`.rotated_energy`). On vertex v the row is t_gk mu_gv, mu_gv
+(3,) the moment row of v in group g (column j of C_g is sum_v mu_gv[j] X_v), so Q's pattern is
+fixed: it is found once and each assembly fills its data with one batched product.
+
+A factor of H at one iterate preconditions the conjugate gradients of the next ones (a drag's
+moves change H a little at a time). H is factored without pivoting (the order keeps symmetry), so
+it is positive definite exactly when every pivot is positive; an indefinite H (past a fold) gives
+no factor and the caller keeps K's. Factoring runs without the GIL for most of its time, so a
+drag can make the next factor on another thread (:meth:`HessianFactor.factor` is pure).
+"""
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from .threads import pool
+
+
+class Factored:
+    """H^-1 at one iterate: :meth:`solve` of (f, 3) arrays."""
+
+    def __init__(self, lu, size):
+        self._lu, self._size = lu, size
+
+    def solve(self, values):
+        """H^-1 ``values`` (f, 3) -> (f, 3)."""
+        return self._lu.solve(np.ascontiguousarray(values).reshape(self._size)).reshape(values.shape)
+
+
+class HessianFactor:
+    """H (module docstring) of ``energy`` (a :class:`.rotated_energy.RotatedEnergy`) over ``free``
+    (f,) of its m vertices."""
+
+    def __init__(self, energy, free, m):
+        free = np.asarray(free)
+        f = free.size
+        position = np.full(m, -1)
+        position[free] = np.arange(f)
+        # (group, vertex) moment rows: the union of the three moment matrices' patterns, free
+        # vertices only (held ones are no unknowns).
+        moments = energy.moments_coo()
+        g = energy.n_groups
+        column, group = moments.row // g, moments.row % g
+        keys, inverse = np.unique(group * m + moments.col, return_inverse=True)
+        mu = np.zeros((keys.size, 3))
+        np.add.at(mu, (inverse, column), moments.data)
+        vertex = position[keys % m]
+        moving = vertex >= 0
+        self._group, self._mu, vertex = keys[moving] // m, mu[moving], vertex[moving]
+        # Entry (n, k, c) of the batched product is Q[3 group_n + k, 3 vertex_n + c].
+        three = np.arange(3)
+        rows = np.broadcast_to((3 * self._group)[:, None, None] + three[None, :, None], (vertex.size, 3, 3)).ravel()
+        cols = np.broadcast_to((3 * vertex)[:, None, None] + three[None, None, :], (vertex.size, 3, 3)).ravel()
+        self._order = np.lexsort((cols, rows))
+        self._rows = rows[self._order]
+        self._q_pattern = (cols[self._order].astype(np.int32),
+                           np.searchsorted(self._rows, np.arange(3 * g + 1)).astype(np.int32))
+        self._q_shape = (3 * g, 3 * f)
+        self._gram = sp.kron(energy.gram[free][:, free], sp.identity(3), format="csc")
+        self.size = 3 * f
+
+    def matrix(self, state):
+        """(3f, 3f) CSC H at ``state`` (an EnergyState of the energy)."""
+        twists = state.twists.reshape(-1, 3, 3, 3)[self._group]  # [n, k, j, c]: entry (c, j) of t_k
+        q = np.einsum("nkjc,nj->nkc", twists, self._mu).ravel()[self._order]
+        q_matrix = sp.csr_matrix((q, *self._q_pattern), shape=self._q_shape)
+        weighted = sp.csr_matrix((q * state.weights.ravel()[self._rows], *self._q_pattern), shape=self._q_shape)
+        return (2.0 * (self._gram - (q_matrix.T @ weighted))).tocsc()
+
+    def factor(self, state):
+        """:class:`Factored` H at ``state``, or None when H is not positive definite. Changes
+        nothing on ``self``: safe to run on another thread while the caller goes on."""
+        if not self.size:
+            return None
+        try:
+            lu = splu(self.matrix(state), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                      options={"SymmetricMode": True})
+        except RuntimeError:  # exactly singular
+            return None
+        pivots = lu.U.diagonal()
+        if not (np.all(np.isfinite(pivots)) and np.all(pivots > 0.0)):
+            return None
+        return Factored(lu, self.size)
+
+
+class LaggedHessian:
+    """The newest :class:`Factored` H a solve has asked for, kept across solves (a drag's moves):
+    :meth:`solver` gives its solve (None while there is none), :meth:`refresh` asks for one at a
+    new iterate, made on the core's thread pool and taken up by the first :meth:`solver` call
+    after it is done (the older factor serves until then)."""
+
+    def __init__(self, hessian):
+        self._hessian = hessian
+        self._factored = None
+        self._pending = None
+
+    def reset(self):
+        """Forget the factor and any pending one (the next solve starts as a fresh object's would)."""
+        self._factored, self._pending = None, None
+
+    def solver(self):
+        """The held factor's solve ((f, 3) -> (f, 3)), or None."""
+        if self._pending is not None and self._pending.done():
+            done, self._pending = self._pending, None
+            self._factored = done.result()
+        return None if self._factored is None else self._factored.solve
+
+    def refresh(self, state):
+        """Ask for H at ``state`` (an EnergyState), unless one is still being made."""
+        if self._pending is None:
+            state.twists  # made here: the state is read-only from now on
+            self._pending = pool().submit(self._hessian.factor, state)
