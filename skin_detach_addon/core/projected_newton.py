@@ -100,8 +100,8 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
     time.perf_counter() value no iteration should end after (one that would, taking as long as
     the last, is not started; the first always runs); ``lagged``: a
     :class:`.hessian_factor.LaggedHessian` whose factor preconditions instead of K's when it has
-    one; with a deadline, it is refreshed on the thread pool at the iterate after CG needed more
-    than :data:`REFRESH_STEPS` steps (without one, the solve never asks for a factor, so it is a
+    one; with a deadline, it is refreshed on the thread pool at the step accepted after CG needed
+    more than :data:`REFRESH_STEPS` steps (without one, the solve never asks for a factor, so it is a
     function of its start and the factor it is given). Returns :class:`NewtonResult`."""
     x = points.copy()
     m = x.shape[0]
@@ -110,14 +110,9 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
     state = energy.at(x)
     history, energies = [], [state.energy]
     converged, iterations = False, 0
-    stale = False
     for iterations in range(1, max_iter + 1):
         begun = time.perf_counter()
-        solve_p = solve_k
-        if lagged is not None:
-            if stale:
-                lagged.refresh(state)
-            solve_p = lagged.solver() or solve_k
+        solve_p = (lagged.solver() if lagged is not None else None) or solve_k
         tangent = _Tangent(volume, x, free, solve_p) if volume is not None else None
         gradient = state.gradient[free]
         if tangent is not None:
@@ -137,8 +132,6 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             return y if tangent is None else tangent.project(y)
 
         step, negative, steps = _newton_step(hessian, precondition, gradient)
-        # A Hessian with negative curvature would not factor positive definite: no refresh then.
-        stale = deadline is not None and lagged is not None and not negative and steps > REFRESH_STEPS
         proposed = largest_step(step, diagonal)
         slope = float(np.sum(gradient * step))
         if slope >= 0.0 or not np.isfinite(slope):
@@ -166,6 +159,9 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             break
         moved = largest_step(accepted.points[free] - x[free], diagonal)
         x, state = accepted.points, accepted
+        # A Hessian with negative curvature would not factor positive definite: no refresh then.
+        if deadline is not None and lagged is not None and not negative and steps > REFRESH_STEPS:
+            lagged.refresh(state)
         history.append(moved)
         energies.append(state.energy)
         if not negative and length == 1.0 and moved <= tol:
