@@ -286,3 +286,34 @@ def test_mesh_x_symmetry_makes_twins_and_keeps_a_rig_without_mirror_flags_symmet
     from skin_detach_addon.blender import binding
     targets = binding.open_binding(obj).surface.proxy_vertices[ids] @ motion[:3, :3].T + motion[:3, 3]
     assert np.abs(proxy_points - targets).max() <= 1e-5 * size  # the handle is exact where it is shown
+
+
+@pytest.mark.parametrize("scale", [0.5, 2.0, -1.0])
+def test_s_on_a_self_symmetric_handle_keeps_the_scale_about_its_centre(scene, scale):
+    from skin_detach_addon.blender import binding, handles
+    obj = monkey()
+    obj.data.use_mirror_x = True
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    size = float(np.ptp(rest, axis=0).max())
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
+    top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75))  # its own mirror image
+    assert handles.twin_of(top) is None
+    centre = np.array(handles.rest_local_of(top))[:3, 3]
+    top.scale = (scale, scale, scale)                         # S about the handle's centre, as the drag does
+    api.deform(obj)
+    motion = handles.local_motion(obj, top)
+    centre[0] = 0.0                                           # its proxy vertices' centre, put on the plane
+    expected = np.eye(4)
+    expected[:3, :3] *= scale
+    expected[:3, 3] = (1.0 - scale) * centre
+    assert np.allclose(motion, expected, atol=1e-6 * size)    # not a translation of the cap to the origin
+    moved = positions(obj)
+    assert _mirror_error(moved) <= 1e-6 * size
+    ids = handles.proxy_ids_of(top)
+    proxy = api.proxy_of(obj)
+    proxy_points = np.array([proxy.data.vertices[i].co for i in ids])
+    targets = binding.open_binding(obj).surface.proxy_vertices[ids] * scale + (1.0 - scale) * centre
+    assert np.abs(proxy_points - targets).max() <= 1e-5 * size
+    cap = np.flatnonzero(rest[:, 2] > 0.85)                   # the mesh follows the proxy: the cap is scaled
+    assert np.abs(moved[cap] - (rest[cap] * scale + (1.0 - scale) * centre)).max() <= 0.05 * size

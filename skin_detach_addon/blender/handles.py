@@ -255,15 +255,21 @@ def self_symmetric(empty, mapping):
 
 
 def symmetric_motion(motion, axis):
-    """(4, 4) the rigid motion nearest to ``motion`` (4, 4) that commutes with the mirror across
-    ``axis``: the average with its mirror image, its linear part's nearest rotation (polar)."""
+    """(4, 4) the motion nearest to ``motion`` (4, 4) that commutes with the mirror across
+    ``axis``, of the same kind: the linear part's polar factors A = Q P (Q orthogonal, P the
+    symmetric stretch: a uniform scale, negative or zero included) are each made symmetric, Q by
+    the nearest orthogonal matrix of the same handedness to its average with its mirror image, P
+    and the translation by that average. A rigid motion stays rigid, a uniform scale (S) about a
+    centre on the plane is kept as it is."""
     reflect = mirror_matrix(axis)
-    average = 0.5 * (motion + reflect @ motion @ reflect)
-    u, _, vt = np.linalg.svd(average[:3, :3])
-    if np.linalg.det(u @ vt) < 0:
-        u[:, -1] *= -1.0
-    out = average.copy()
-    out[:3, :3] = u @ vt
+    flip = reflect[:3, :3]
+    u, sigma, vt = np.linalg.svd(motion[:3, :3])
+    turn, stretch = u @ vt, (vt.T * sigma) @ vt
+    w, _, zt = np.linalg.svd(0.5 * (turn + flip @ turn @ flip))
+    if np.linalg.det(w @ zt) * np.linalg.det(turn) < 0:
+        w[:, -1] *= -1.0
+    out = 0.5 * (motion + reflect @ motion @ reflect)
+    out[:3, :3] = (w @ zt) @ (0.5 * (stretch + flip @ stretch @ flip))
     return out
 
 
