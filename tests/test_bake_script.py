@@ -98,7 +98,7 @@ def test_a_frame_is_byte_identical_whichever_chunk_baked_it(rig_file, tmp_path):
 
 
 def test_the_add_on_module_runs_the_same_bake(rig_file, tmp_path):
-    code = ("import sys, bpy; sys.path.insert(0, %r); from skin_detach_addon.ui import bake_cli; "
+    code = ("import sys, bpy; sys.path.insert(0, %r); from skin_detach_addon import bake_cli; "
             "bake_cli.main(sys.argv[1:])" % str(BAKE.parent.parent))
     run = subprocess.run([sys.executable, "-c", code, "--blend", str(rig_file), "--frames", "2",
                           "--output", str(tmp_path / "m_####.obj")], capture_output=True, text=True, timeout=300)
@@ -125,3 +125,31 @@ def test_a_bake_killed_mid_frame_leaves_only_complete_files(rig_file, tmp_path):
     assert all(p.read_bytes() == whole[p.name] for p in visible)  # complete, or not there at all
     again = bake("--blend", rig_file, "--frames", "1-4", "--output", target / "k_####.obj")
     assert again.returncode == 0 and {p.name: p.read_bytes() for p in target.iterdir()} == whole
+
+
+@pytest.mark.parametrize("error", [ValueError("a bug"), KeyError("frame")])
+def test_an_unexpected_error_exits_1_with_its_traceback(error, monkeypatch, capsys):
+    from skin_detach_addon import bake_cli
+
+    def broken(args):
+        raise error
+    monkeypatch.setattr(bake_cli, "run", broken)
+    with pytest.raises(SystemExit) as stop:
+        bake_cli.main(["--output", "out/f_####.obj"])
+    assert stop.value.code == 1                               # Blender would exit 0 after an uncaught error
+    err = capsys.readouterr().err
+    assert "Traceback" in err and f"bake: error: unexpected {type(error).__name__}" in err
+
+
+def test_a_frame_whose_file_is_missing_after_the_bake_fails_the_bake(rig_file, tmp_path, monkeypatch, capsys):
+    from skin_detach_addon import api, bake_cli
+    real = api.bake
+
+    def loses_a_file(*args, **kwargs):
+        records = real(*args, **kwargs)
+        pathlib.Path(records[1]["output"]).unlink()           # e.g. a full disk or a cleaner on the share
+        return records
+    monkeypatch.setattr(api, "bake", loses_a_file)
+    with pytest.raises(SystemExit) as stop:
+        bake_cli.main(["--blend", str(rig_file), "--frames", "1-3", "--output", str(tmp_path / "f_####.obj")])
+    assert stop.value.code == 1 and "missing frames: [2]" in capsys.readouterr().err

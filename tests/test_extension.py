@@ -11,6 +11,8 @@ import pytest
 
 pytest.importorskip("bpy")
 
+from skin_detach_addon.bake_cli import FARM_EXPR  # noqa: E402
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 INSTALL_AND_RUN = r'''
@@ -83,29 +85,49 @@ def test_build_refuses_unknown_platforms(tmp_path):
     assert run.returncode == 2 and "--platforms" in run.stderr
 
 
-#: A stand-in for Blender's command line on a farm worker, ``blender -b [-y] FILE --python-expr EXPR
-#: -- ARGS``, with the bpy module: it enables the installed extension (as Blender does at start),
-#: opens FILE and runs EXPR; the repository is not on the path.
+#: A stand-in for Blender's command line on a farm worker, ``blender -b [-y] FILE
+#: [--python-exit-code N] --python-expr EXPR -- ARGS``, with the bpy module and Blender's rules:
+#: it starts with the user's preferences (so the extensions enabled there load, from whatever
+#: repository), opens FILE, runs EXPR, and after an uncaught Python error exits N, or 0 when no
+#: --python-exit-code was given (sys.exit keeps its code); the repository is not on the path.
 BLENDER_STAND_IN = r'''
-import sys
+import os, sys, traceback
 import bpy
-import addon_utils
 
-args = [a for a in sys.argv[1:sys.argv.index("--")] if a not in ("-b", "-y")]
-assert len(args) == 3 and args[1] == "--python-expr", sys.argv
-addon_utils.enable("bl_ext.user_default.skin_detach_addon", default_set=True)
-bpy.ops.wm.open_mainfile(filepath=args[0])
-exec(args[2])
+argv = sys.argv[1:sys.argv.index("--")] if "--" in sys.argv else sys.argv[1:]
+exit_code, blend, expr = 0, None, None
+while argv:
+    arg = argv.pop(0)
+    if arg == "--python-exit-code":
+        exit_code = int(argv.pop(0))
+    elif arg == "--python-expr":
+        expr = argv.pop(0)
+    elif arg not in ("-b", "--background", "-y"):
+        blend = arg
+if os.path.isfile(os.path.join(bpy.utils.user_resource("CONFIG"), "userpref.blend")):
+    bpy.ops.wm.read_userpref()
+bpy.ops.wm.open_mainfile(filepath=blend)
+try:
+    exec(compile(expr, "<string>", "exec"), {"__name__": "__main__"})
+except SystemExit:
+    raise
+except BaseException:
+    traceback.print_exc()
+    sys.exit(exit_code)
 assert "skin_detach_addon" not in sys.modules, "the repository copy was imported"
 '''
 
 MAKE_RIG = r'''
-import sys
+import os, sys
 import numpy as np
 import bpy
 
-bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
-from bl_ext.user_default.skin_detach_addon import api
+# A studio's own extension repository (not user_default), saved in the worker's preferences.
+bpy.context.preferences.extensions.repos.new(name="Studio", module="studio", source='USER',
+                                             custom_directory=os.path.join(os.path.dirname(sys.argv[2]), "studio"))
+bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="studio", enable_on_install=True)
+bpy.ops.wm.save_userpref()
+from bl_ext.studio.skin_detach_addon import api
 bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
 obj = bpy.context.active_object
 obj.name = "scan"
@@ -121,12 +143,13 @@ bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 30
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
 '''
 
-BAKE_EXPR = "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()"
+BAKE_ARGS = ["--python-exit-code", "1", "--python-expr", FARM_EXPR]
 
 
 @pytest.fixture(scope="module")
 def worker(extension_zip, tmp_path_factory):
-    """A farm worker's set-up: the extension installed in its own Blender user folder, a saved rig
+    """A farm worker's set-up: the extension installed in a studio repository of its own Blender
+    user folder and enabled in its preferences, a saved rig
     (a sphere whose handle moves and turns over frames 1-30) and a ``blender`` stand-in. Returns
     (folder, environment, the stand-in's path, the rig's path)."""
     zips, _ = extension_zip
@@ -157,7 +180,7 @@ def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(worker
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert "Chunks run: 8" in run.stdout and run.stdout.count("bake: error") == 0
-    one = subprocess.run([str(stand_in), "-b", str(rig), "--python-expr", BAKE_EXPR, "--",
+    one = subprocess.run([str(stand_in), "-b", str(rig), *BAKE_ARGS, "--",
                           "--frames", "1-30", "--output", str(tmp_path / "one" / "f_####.obj")],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert one.returncode == 0, one.stdout[-2000:] + one.stderr[-2000:]
@@ -188,3 +211,29 @@ def test_the_flamenco_job_types_command_runs_on_a_worker_with_only_the_extension
     run = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     assert sorted(p.name for p in (tmp_path / "bake").iterdir()) == [f"s010_rig_{k:04d}.obj" for k in range(1, 11)]
+
+
+def test_a_worker_without_the_extension_fails_its_tasks_in_flamenco_and_openjd(worker, tmp_path):
+    import json
+    import shutil
+    _, env, stand_in, rig = worker
+    env = dict(env, BLENDER_USER_RESOURCES=str(tmp_path / "bare_user"))  # a Blender with no extension
+    settings = {"frames": "1-4", "chunk_size": 4, "object": "scan", "output_folder": str(tmp_path / "bake"),
+                "format": ".obj", "apply_modifiers": False, "preserve_volume": True, "blendfile": str(rig)}
+    node = shutil.which("node")
+    if node is not None:
+        compiled = subprocess.run([node, str(ROOT / "tests" / "farm" / "flamenco_stand_in.js"),
+                                   str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings), "s010"],
+                                  capture_output=True, text=True, timeout=60)
+        command = json.loads(compiled.stdout)[0]["commands"][0]["parameters"]
+        line = [str(stand_in), "-b", "-y", *command["argsBefore"], command["blendfile"], *command["args"]]
+        run = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert run.returncode != 0 and "extension is not enabled" in run.stderr, run.stdout[-2000:] + run.stderr[-2000:]
+    openjd = pathlib.Path(sys.executable).parent / "openjd"
+    if openjd.exists():
+        run = subprocess.run([str(openjd), "run", str(ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"),
+                              "-p", f"BlendFile={rig}", "-p", f"OutputPattern={tmp_path / 'jd' / 'f_####.obj'}",
+                              "-p", "Frames=1-4", "-p", "ChunkSize=4", "-p", f"BlenderExecutable={stand_in}"],
+                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert run.returncode != 0 and "extension is not enabled" in run.stdout, run.stdout[-3000:]
+    assert not (tmp_path / "bake").exists() and not (tmp_path / "jd").exists()

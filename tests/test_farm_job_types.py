@@ -38,3 +38,21 @@ def test_every_chunk_parses_with_the_bake_cli_and_together_they_cover_each_frame
         assert args[args.index("--modifiers") + 1] == "apply" and args[args.index("--volume") + 1] == "free"
     expected = parse_frames(frames.replace("..", "-"))
     assert covered == expected and len(set(covered)) == len(covered)
+
+
+def test_both_job_types_make_blender_fail_on_any_error_and_find_the_addon_in_any_repository():
+    yaml = pytest.importorskip("yaml")
+    from skin_detach_addon.bake_cli import FARM_EXPR
+    settings = {"frames": "1-3", "chunk_size": 10, "object": "", "output_folder": "/out", "format": ".obj",
+                "apply_modifiers": False, "preserve_volume": True, "blendfile": "/shots/a.blend"}
+    compiled = subprocess.run([NODE, str(ROOT / "tests" / "farm" / "flamenco_stand_in.js"),
+                               str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings)],
+                              capture_output=True, text=True, timeout=60)
+    flamenco = json.loads(compiled.stdout)[0]["commands"][0]["parameters"]["args"]
+    template = yaml.safe_load((ROOT / "farm" / "openjd" / "skin_detach_bake.yaml").read_text())
+    openjd = template["steps"][0]["script"]["actions"]["onRun"]["args"]
+    for args in (flamenco, openjd):
+        # Blender exits 0 after an uncaught Python error unless --python-exit-code comes before the script.
+        start = args.index("--python-expr")
+        assert args[start - 2:start] == ["--python-exit-code", "1"] and args[start + 1] == FARM_EXPR
+    assert "user_default" not in FARM_EXPR and "sys.exit(" in FARM_EXPR

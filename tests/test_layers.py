@@ -55,6 +55,10 @@ def test_api_imports_blender_and_core_only():
     assert imported_packages(ADDON / "api.py") <= {"blender", "core"}
 
 
+def test_the_bake_cli_imports_the_api_only():
+    assert imported_packages(ADDON / "bake_cli.py") <= {"api"}
+
+
 def test_importing_the_api_loads_no_ui():
     pytest.importorskip("bpy")
     code = ("import sys, bpy\n"

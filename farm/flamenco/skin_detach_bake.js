@@ -2,14 +2,17 @@
 // flamenco-manager executable; the file name makes the job type `skin-detach-bake`).
 //
 // One task per chunk of frames; each runs the add-on's own bake CLI in Blender on a Worker that
-// has the Skin Detach extension installed (module bl_ext.user_default.skin_detach_addon, with
-// its bundled scipy and fast-simplification): no checkout of the repository is needed. Frames
-// go to one .obj or .ply file each, named from the job and the .blend; a frame gives the same
+// has the Skin Detach extension installed and enabled, from any extension repository (with its
+// bundled scipy and fast-simplification): no checkout of the repository is needed. A task fails
+// (non-zero exit) when the extension is missing or the bake fails for any reason:
+// `--python-exit-code 1` makes Blender exit 1 after an uncaught Python error, where it exits 0.
+// Frames go to one .obj or .ply file each, named from the job and the .blend; a frame gives the same
 // bytes whichever chunk or Worker bakes it, and a killed task leaves only complete files (each
 // file is written under a hidden partial name and renamed). The Manager expands {blender} and
 // {blenderArgs} per Worker (variables in flamenco-manager.yaml).
 
-const BAKE_EXPR = "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()";
+// The same text as skin_detach_addon/bake_cli.py FARM_EXPR (a test compares them).
+const BAKE_EXPR = "import importlib, sys, bpy; found = sorted(a.module for a in bpy.context.preferences.addons if a.module.rsplit('.', 1)[-1] == 'skin_detach_addon'); found or sys.exit('bake: error: the Skin Detach extension is not enabled in this Blender ' + bpy.app.version_string + '; install it on every Worker that takes bake tasks'); importlib.import_module(found[0] + '.bake_cli').main()";
 const FORMATS = [".obj", ".ply"];
 
 const JOB_TYPE = {
@@ -71,7 +74,7 @@ function compileJob(job) {
   for (const chunk of frameChunker(settings.frames, size)) {
     const task = author.Task("bake-" + chunk, "blender");
     const args = [
-      "--python-expr", BAKE_EXPR, "--",
+      "--python-exit-code", "1", "--python-expr", BAKE_EXPR, "--",
       "--frames", chunk,
       "--output", pattern,
       "--object", settings.object || "",

@@ -32,7 +32,7 @@ test("250 frames in chunks of 10 make 25 blender-render tasks of 10 steps", () =
     assert.equal(command.totalStepCount, parseRange(frames).length);
     covered.push(...parseRange(frames));
     assert.equal(p.args[p.args.indexOf("--output") + 1], "/render/shot/bake/s010_shot010_####.obj");
-    assert.ok(p.args[1].includes("bl_ext.user_default.skin_detach_addon.ui import bake_cli"));
+    assert.deepEqual(p.args.slice(0, 3), ["--python-exit-code", "1", "--python-expr"]);  // fail on any error
     assert.deepEqual(p.args.slice(p.args.indexOf("--object")), ["--object", "scan", "--modifiers", "ignore",
       "--volume", "keep"]);
   }

@@ -1,8 +1,11 @@
 """Bake a Skin Detach rig frame by frame: evaluate the (animated) handle empties at every frame
 of a range, rebuild the detail mesh and write it out.
 
-On a farm worker (Blender with the extension installed, no checkout):
-    blender -b scene.blend --python-expr "from bl_ext.user_default.skin_detach_addon.ui import bake_cli; bake_cli.main()" -- ARGS
+On a farm worker (Blender with the extension installed from any repository, no checkout):
+    blender -b scene.blend --python-exit-code 1 --python-expr "FARM_EXPR" -- ARGS
+(FARM_EXPR below, as the farm job types pass it: it finds the enabled extension whatever
+repository it came from and exits 1 when there is none; --python-exit-code 1 makes Blender
+exit 1 after an uncaught Python error, where it would exit 0.)
 From a checkout:     blender --background scene.blend --python scripts/bake.py -- ARGS
 With the bpy module: python scripts/bake.py --blend scene.blend ARGS
 
@@ -22,14 +25,26 @@ ARGS:
 
 The binding saved in the file is reused; it is built only when the mesh has none but has
 handles (a file from an older version). Re-running gives the same output. Exits 0 on success,
-1 with a one-line message on failure (missing object, no binding and no handles, unwritable
-output, ...), 2 on bad arguments.
+1 with a one-line message on any failure (missing object, no binding and no handles, unwritable
+output, a frame whose file is missing after the bake, an unexpected error with its traceback),
+2 on bad arguments.
 """
 
 import argparse
 import os
 import sys
 import time
+import traceback
+
+#: The Python expression a farm worker's Blender runs (``--python-expr``): the enabled Skin Detach
+#: add-on, from whichever extension repository (``bl_ext.<repository>.skin_detach_addon``) or as a
+#: legacy add-on, runs this CLI; without it Blender exits 1 with a message naming what is missing.
+FARM_EXPR = ("import importlib, sys, bpy; "
+             "found = sorted(a.module for a in bpy.context.preferences.addons "
+             "if a.module.rsplit('.', 1)[-1] == 'skin_detach_addon'); "
+             "found or sys.exit('bake: error: the Skin Detach extension is not enabled in this Blender ' "
+             "+ bpy.app.version_string + '; install it on every Worker that takes bake tasks'); "
+             "importlib.import_module(found[0] + '.bake_cli').main()")
 
 
 def parse_args(argv):
@@ -97,7 +112,7 @@ def ensure_binding(api, obj, args):
 def run(args):
     import bpy
 
-    from .. import api
+    from . import api
 
     if args.blend:
         if not os.path.isfile(args.blend):
@@ -126,6 +141,12 @@ def run(args):
 
     records = api.bake(obj, frames, into=into, path=None if to_blend else args.output,
                        preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress)
+    if not to_blend:
+        missing = [r["frame"] for r in records if not os.path.isfile(r["output"])]
+        if len(records) != len(frames) or missing:
+            raise BakeFailed(f"--output: expected one file for each of the {len(frames)} frames, "
+                             f"{len(records) - len(missing)} were written (missing frames: "
+                             f"{sorted(set(frames) - {r['frame'] for r in records} | set(missing))})")
     if to_blend:
         bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.output), copy=True)
     seconds = time.perf_counter() - start
@@ -135,18 +156,22 @@ def run(args):
 
 def main(argv=None):
     """Run the bake with ``argv`` (default: the command line's, after ``--`` inside Blender);
-    exits 1 with a one-line message on failure, 2 on bad arguments."""
+    exits 1 with a one-line message on failure (any error: Blender itself would exit 0 after an
+    uncaught one), 2 on bad arguments."""
     args = parse_args(script_argv() if argv is None else argv)
     try:
         import bpy  # noqa: F401  (first: the bpy module makes mathutils importable)
 
-        from ..api import SkinDetachError
+        from .api import SkinDetachError
         try:
             run(args)
         except (SkinDetachError, BakeFailed) as exc:
             raise BakeFailed(str(exc)) from None
         except RuntimeError as exc:  # a Blender operator's error report
             raise BakeFailed(str(exc).strip()) from None
+        except Exception as exc:  # a bug: the traceback for the task log, and a failed task
+            traceback.print_exc()
+            raise BakeFailed(f"unexpected {type(exc).__name__}: {exc}") from None
     except BakeFailed as exc:
         print(f"bake: error: {exc}", file=sys.stderr, flush=True)
         sys.exit(1)
