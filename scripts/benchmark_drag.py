@@ -1,17 +1,26 @@
 """The modal drag as an artist feels it, beside Blender's own stack on the same mesh.
 
-    python scripts/benchmark_drag.py [--meshes armadillo,bunny,rocker-arm-40K] [--faces 1000,2000]
-                                     [--moves 60] [--json PATH]
+    python scripts/benchmark_drag.py [--meshes cow,cheburashka,armadillo,bunny,rocker-arm,armadillo-300K]
+                                     [--faces 1000] [--moves 60] [--rest-ms 150] [--json PATH]
 
-Per mesh (30-60K vertices; ``rocker-arm-40K`` is rocker-arm.obj flat-subdivided once) and proxy
-size: the bend scenario's anchors (lowest 10 % of the longest axis) pinned, a handle on the
-highest 10 %, and a DragSession that presses R and turns the handle 90 degrees about the view
-axis (the view looks along the mesh's shortest axis) in ``--moves`` mouse moves, then confirms.
-Figures: move ms (event + depsgraph update: median, p95, slowest), moves that stopped on the
-budget before converging, confirm ms, and the release pop: the largest vertex jump between the
-mesh after the last move and after the confirm, over the bounding-box diagonal. Blender's stack
-(Decimate to the same face count + Hook + Laplacian Deform + Surface Deform) is stepped through
-the same 90-degree turn in the same process: its step ms (median, p95), and our p95 over its.
+Per mesh (flat-subdivided to at least 25K vertices; ``armadillo-300K`` is armadillo.obj after one
+6-way subdivision, dragged at full detail, no preview) and proxy size: the bend scenario's anchors
+(lowest 10 % of the longest axis) pinned, a handle on the highest 10 %, and a DragSession that
+presses R and turns the handle 90 degrees about the view axis (the view looks along the mesh's
+shortest axis) in ``--moves`` mouse moves, then ``--rest-ms`` of TIMER events (the mouse rests),
+then confirms. Figures:
+
+- move ms (event + depsgraph update: median, p95, slowest) and moves that did not certify;
+- tracking: the shown mesh after every move against the converged path (the same handle
+  transforms replayed through ``api.deform(follow=True)`` on a fresh build): largest vertex
+  distance over the bounding-box diagonal, median and max over the moves; path ratio: the sum
+  over moves of the largest vertex step of the shown mesh over the same for the converged path;
+- rest: TIMER events run and whether the drag said "settled"; release pop: the largest vertex
+  jump between the mesh after the rest and after the confirm, over the diagonal; confirm ms;
+- Blender's stack (Decimate to the same face count + Hook + Laplacian Deform + Surface Deform)
+  stepped through the same turn in the same process: step ms (median, p95), whether it moved the
+  mesh at all (Laplacian Deform refuses some decimated proxies: then its step is a no-op's cost
+  and no ratio is given), and our p95 over its p95.
 """
 
 import argparse
@@ -29,7 +38,7 @@ import bpy  # noqa: E402  (first: the bpy module makes mathutils importable)
 from mathutils import Matrix  # noqa: E402
 
 from bench import blender_stack  # noqa: E402
-from bench.meshes import blender_mesh, bundled, subdivide  # noqa: E402
+from bench.meshes import blender_mesh, bundled, subdivide, subdivided  # noqa: E402
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
 
@@ -38,12 +47,17 @@ from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.blender import mesh_io  # noqa: E402
 
 RADIUS_PX = 100.0
+#: Meshes smaller than this are flat-subdivided (4 ways) until they reach it.
+AT_LEAST = 25_000
 
 
 def mesh(name):
-    if name.endswith("-40K"):
-        return subdivide(*bundled(name[:-4]), 4)
-    return bundled(name)
+    if name == "armadillo-300K":
+        return subdivided("armadillo", (6,))
+    points, triangles = bundled(name)
+    while points.shape[0] < AT_LEAST:
+        points, triangles = subdivide(points, triangles, 4)
+    return points, triangles
 
 
 def percentile(values, q):
@@ -58,21 +72,39 @@ def turn_matrix(axis, pivot, angle):
     return out
 
 
-def our_drag(name, points, triangles, faces, moves):
+def rigged(name, points, triangles, faces):
+    """A fresh scene with the mesh bound to a ``faces`` proxy, the scenario's anchor and handle."""
     bpy.ops.wm.read_homefile(use_empty=True)
     obj = blender_mesh(name, points, triangles)
     api.build(obj, target_faces=faces)
     scenario = bend_scenario(points)
     api.add_anchor(obj, scenario.anchor_ids)
-    handle = api.add_handle(obj, scenario.handle_ids)
+    return obj, api.add_handle(obj, scenario.handle_ids), scenario
+
+
+def shown(obj):
+    return mesh_io.read_positions(obj.data).astype(np.float64)
+
+
+def path_length(frames, rest):
+    """Sum over consecutive ``frames`` (from ``rest``) of the largest vertex step."""
+    total, last = 0.0, rest
+    for frame in frames:
+        total += float(np.linalg.norm(frame - last, axis=1).max())
+        last = frame
+    return total
+
+
+def our_drag(name, points, triangles, faces, moves, rest_ms):
+    obj, handle, scenario = rigged(name, points, triangles, faces)
     axis = np.zeros(3)
     axis[int(np.argmin(np.ptp(points, axis=0)))] = 1.0
     view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
     centre = np.array(view.to_screen(handle.matrix_world.to_translation()))
     start = tuple(centre + (RADIUS_PX, 0.0))
-    session = api.DragSession(obj, handle, view, start)
+    session = api.DragSession(obj, handle, view, start, preview_above=None)
     session.event("R", "PRESS", start)
-    times, unconverged = [], 0
+    times, unconverged, frames, matrices = [], 0, [], []
     for k in range(1, moves + 1):
         angle = math.radians(90.0) * k / moves
         mouse = tuple(centre + RADIUS_PX * np.array((math.cos(angle), math.sin(angle))))
@@ -81,17 +113,41 @@ def our_drag(name, points, triangles, faces, moves):
         bpy.context.view_layer.update()
         times.append(1000 * (time.perf_counter() - begun))
         unconverged += not session.last.converged
-    shown = mesh_io.read_positions(obj.data).astype(np.float64)
+        frames.append(shown(obj))
+        matrices.append(handle.matrix_world.copy())
+    timers, settle_ms, begun = 0, None, time.perf_counter()
+    while time.perf_counter() - begun < rest_ms / 1000.0:
+        session.event("TIMER", "NOTHING", mouse)
+        bpy.context.view_layer.update()
+        if settle_ms is None:
+            timers += 1
+            if session.settled:
+                settle_ms = 1000 * (time.perf_counter() - begun)
+    settled = session.settled and "settled" in session.header
+    rested = shown(obj)
     begun = time.perf_counter()
     session.event("LEFTMOUSE", "PRESS", mouse)
     bpy.context.view_layer.update()
     confirm_ms = 1000 * (time.perf_counter() - begun)
-    written = mesh_io.read_positions(obj.data).astype(np.float64)
+    written = shown(obj)
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
-    pop = float(np.linalg.norm(written - shown, axis=1).max()) / diagonal
+    pop = float(np.linalg.norm(written - rested, axis=1).max()) / diagonal
     proxy_faces = api.figures(obj)["build"]["proxy_faces"]
+
+    # The converged path: the same transforms, each solved to the settle tolerance from the last.
+    obj, handle, _ = rigged(name, points, triangles, faces)
+    errors, converged = [], []
+    for matrix, frame in zip(matrices, frames):
+        handle.matrix_world = matrix
+        api.deform(obj, follow=True)
+        converged.append(shown(obj))
+        errors.append(float(np.linalg.norm(frame - converged[-1], axis=1).max()) / diagonal)
+    rest = points.astype(np.float32).astype(np.float64)
+    ratio = path_length(frames, rest) / max(path_length(converged, rest), 1e-300)
     return {"proxy_faces": proxy_faces, "move_ms_median": float(np.median(times)), "move_ms_p95": percentile(times, 95),
-            "move_ms_max": float(np.max(times)), "unconverged_moves": int(unconverged), "confirm_ms": confirm_ms,
+            "move_ms_max": float(np.max(times)), "unconverged_moves": int(unconverged),
+            "tracking_median": float(np.median(errors)), "tracking_max": float(np.max(errors)), "path_ratio": ratio,
+            "settle_slices": timers, "settle_ms": settle_ms, "settled": settled, "confirm_ms": confirm_ms,
             "confirm_converged": bool(session.last.converged), "release_pop": pop}, axis, scenario
 
 
@@ -107,35 +163,44 @@ def stack_drag(points, triangles, faces, axis, scenario, moves):
         empty.matrix_world = Matrix(turn_matrix(axis, pivot, math.radians(90.0) * k / moves).tolist())
         bpy.context.view_layer.update()
         times.append(1000 * (time.perf_counter() - begun))
-    return {"step_ms_median": float(np.median(times)), "step_ms_p95": percentile(times, 95)}
+    moved = float(np.abs(blender_stack.evaluated_positions(obj) - points).max()) / float(np.linalg.norm(np.ptp(points, axis=0)))
+    return {"step_ms_median": float(np.median(times)), "step_ms_p95": percentile(times, 95), "moved": moved > 1e-3}
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--meshes", default="armadillo,bunny,rocker-arm-40K")
-    parser.add_argument("--faces", default="1000,2000")
+    parser.add_argument("--meshes", default="cow,cheburashka,armadillo,bunny,rocker-arm,armadillo-300K")
+    parser.add_argument("--faces", default="1000")
     parser.add_argument("--moves", type=int, default=60)
+    parser.add_argument("--rest-ms", type=float, default=150.0)
     parser.add_argument("--json")
     args = parser.parse_args()
     if not hasattr(bpy.types.Scene, "skin_detach"):
         skin_detach_addon.register()
     rows = []
-    print(f"## Modal drag: R, 90 degrees about the view axis in {args.moves} moves, then confirm\n")
-    print("| mesh | vertices | proxy faces | move ms median / p95 / max | unconverged moves | confirm ms "
-          "| release pop (diag) | stack step ms median / p95 | our p95 / stack p95 |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print(f"## Modal drag: R, 90 degrees about the view axis in {args.moves} moves, {args.rest_ms:g} ms of rest "
+          f"(TIMER events), then confirm\n")
+    print("| mesh | vertices | proxy faces | move ms median / p95 / max | uncertified moves | tracking median / max "
+          "(diag) | path ratio | settled after (slices, ms) | release pop (diag) | confirm ms | stack step ms median / p95 "
+          "(moved) | our p95 / stack p95 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in [n for n in args.meshes.split(",") if n]:
         points, triangles = mesh(name)
         for faces in [int(f) for f in args.faces.split(",") if f]:
-            ours, axis, scenario = our_drag(name, points, triangles, faces, args.moves)
+            ours, axis, scenario = our_drag(name, points, triangles, faces, args.moves, args.rest_ms)
             stack = stack_drag(points, triangles, ours["proxy_faces"], axis, scenario, args.moves)
             row = dict(mesh=name, vertices=int(points.shape[0]), **ours, stack=stack)
             rows.append(row)
-            ratio = f"{ours['move_ms_p95'] / stack['step_ms_p95']:.2f}" if stack else "-"
-            stack_text = f"{stack['step_ms_median']:.1f} / {stack['step_ms_p95']:.1f}" if stack else "did not bind"
+            ratio = f"{ours['move_ms_p95'] / stack['step_ms_p95']:.2f}" if stack and stack["moved"] else "-"
+            rest_text = (f"{ours['settle_slices']}, {ours['settle_ms']:.0f}" if ours["settled"] else
+                         f"not settled ({ours['settle_slices']} slices)")
+            stack_text = (f"{stack['step_ms_median']:.1f} / {stack['step_ms_p95']:.1f} "
+                          f"({'yes' if stack['moved'] else 'no: refused'})") if stack else "did not bind"
             print(f"| {name} | {row['vertices']:,} | {ours['proxy_faces']} | {ours['move_ms_median']:.1f} / "
                   f"{ours['move_ms_p95']:.1f} / {ours['move_ms_max']:.1f} | {ours['unconverged_moves']} | "
-                  f"{ours['confirm_ms']:.0f} | {ours['release_pop']:.1e} | {stack_text} | {ratio} |", flush=True)
+                  f"{ours['tracking_median']:.1e} / {ours['tracking_max']:.1e} | {ours['path_ratio']:.2f} | "
+                  f"{rest_text} | {ours['release_pop']:.1e} | "
+                  f"{ours['confirm_ms']:.0f} | {stack_text} | {ratio} |", flush=True)
     if args.json:
         with open(args.json, "w", encoding="utf-8") as handle:
             json.dump(rows, handle, indent=2)

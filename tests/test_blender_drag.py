@@ -163,3 +163,78 @@ def test_the_object_menus_list_every_operator(scene):
         assert idname in drawn
     for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu"):
         assert menus._menu_entry in getattr(bpy.types, name)._dyn_ui_initialize()
+
+
+def _one_iteration_moves(monkeypatch):
+    """Moves that stop after one Newton iteration, as on a large proxy (the first always runs)."""
+    from skin_detach_addon.blender import drag_session
+    monkeypatch.setattr(drag_session, "DRAG_BUDGET_MS", 1e-6)
+
+
+def test_timer_events_settle_the_drag_while_the_mouse_rests_and_confirm_writes_what_was_shown(scene, monkeypatch):
+    from skin_detach_addon.blender.deformation import Deformation
+    _one_iteration_moves(monkeypatch)
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("R", "PRESS", (0, 0))
+    for k in range(1, 9):                                    # a quick turn: moves cannot keep up
+        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    assert not session.settled and "settling" in session.header
+    moves = len(session.step_ms)
+    for _ in range(200):
+        if session.settled:
+            break
+        assert session.event("TIMER", "NOTHING", (-160, 100)) == RUNNING
+    assert session.settled and "settled" in session.header and session.last.converged
+    assert len(session.step_ms) == moves                     # a settle slice is no move
+    shown = mesh_io.read_positions(obj.data).copy()
+    session.event("TIMER", "NOTHING", (-160, 100))           # settled: nothing more to do
+    assert np.array_equal(mesh_io.read_positions(obj.data), shown)
+    assert session.event("LEFTMOUSE", "PRESS", (-160, 100)) == FINISHED
+    assert np.array_equal(mesh_io.read_positions(obj.data), shown)  # no pop: the settled shape as shown
+    Deformation(obj)                                          # the digest is marked: not "edited since"
+
+
+def test_a_drag_confirmed_before_it_settled_is_settled_by_the_confirm(scene, monkeypatch):
+    _one_iteration_moves(monkeypatch)
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("R", "PRESS", (0, 0))
+    for k in range(1, 9):
+        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    assert not session.settled
+    assert session.event("RET", "PRESS", (-160, 100)) == FINISHED and session.last.converged
+
+
+def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_restores_bit_exact(scene, monkeypatch):
+    _one_iteration_moves(monkeypatch)
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    before = _state(obj)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    assert session.event("TIMER", "NOTHING", (0, 0)) == RUNNING and session.last is None
+    _same(_state(obj), before)
+    session.event("MOUSEMOVE", "NOTHING", (40, 30))
+    for _ in range(50):
+        session.event("TIMER", "NOTHING", (40, 30))
+    assert session.event("ESC", "PRESS", (40, 30)) == CANCELLED
+    _same(_state(obj), before)
+
+
+def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
+    from types import SimpleNamespace
+    from skin_detach_addon.blender.binding import follow_start
+    rng = np.random.default_rng(3)
+    older = rng.normal(size=(50, 3))
+    last = older + rng.normal(size=(50, 3))                  # a large jump, cut short or a snap
+    ids = np.arange(5)
+    recent = [SimpleNamespace(vertices=last, converged=False), SimpleNamespace(vertices=older, converged=False)]
+    targets = last[ids] + 0.01
+    start = follow_start(recent, ids, targets)
+    assert np.linalg.norm(start - last, axis=1).max() <= np.linalg.norm(targets - last[ids], axis=1).max() + 1e-12
+    assert np.array_equal(follow_start(recent, ids, last[ids]), last)  # standing still: go on from the last
+    assert follow_start([], ids, targets) is None
+    small = [SimpleNamespace(vertices=older + 1e-4, converged=True), SimpleNamespace(vertices=older, converged=True)]
+    assert np.allclose(follow_start(small, ids, older[ids] + 1.0), older + 2e-4)  # a small motion goes on whole

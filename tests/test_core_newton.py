@@ -123,3 +123,30 @@ def test_a_factor_asked_for_in_the_background_is_taken_up_and_a_reset_forgets_it
     assert lagged.solver() is not None and np.all(np.isfinite(lagged.solver()(residual)))
     lagged.reset()
     assert lagged.solver() is None
+
+
+def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy):
+    from skin_detach_addon.core.projected_newton import _newton_step
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    x = points.copy()
+    x[ids] = targets
+    state = solver.energy_terms.at(x)
+    free = solver.free
+    gradient = state.gradient[free]
+
+    def hessian(p):
+        full = np.zeros_like(x)
+        full[free] = p
+        return solver.energy_terms.hessian_product(state, full)[free]
+
+    def precondition(r):
+        return solver._solve_k(r)
+    unlimited = _newton_step(hessian, precondition, gradient)
+    stopped = _newton_step(hessian, precondition, gradient, deadline=time.perf_counter() - 1.0)
+    assert stopped[2] == 1 < unlimited[2]                     # one Hessian product, then the deadline
+    assert np.sum(stopped[0] * gradient) < 0.0                # still a descent direction
+    moved = x.copy()
+    partial = solver.solve(targets, initial=moved, max_iter=100, tol=1e-12, budget_ms=1e-6)
+    assert partial.iterations == 1 and partial.energy[1] <= partial.energy[0]

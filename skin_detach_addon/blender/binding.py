@@ -32,6 +32,28 @@ SCHEMA_VERSION = 1
 _CACHE = {}
 
 
+def follow_start(recent, ids, targets):
+    """(m, 3) where a drag's next solve starts, or None (from rest) without ``recent`` solutions
+    (newest first, :class:`DualLaplacianResult`) of the same constrained ``ids`` (c,); ``targets``
+    (c, 3) their new positions. The targets stand still (a settle, a confirm): the last solution,
+    to go on from. They moved: the last solution plus the motion between the last two, scaled down
+    so that no vertex is carried farther than the constrained vertices move now. An unbounded
+    extrapolation 2 x1 - x2 doubles whatever jump the last solve made, also one the budget cut
+    short or a snap of the energy's own path, and feeds it back: the shown shape flailed. Bounded,
+    the start adds no more than the handles' own motion to any vertex."""
+    if not recent:
+        return None
+    last = recent[0].vertices
+    if len(recent) < 2 or np.array_equal(last[ids], targets):
+        return last
+    motion = last - recent[1].vertices
+    largest = float(np.sqrt(np.max(np.einsum("ij,ij->i", motion, motion))))
+    handles = float(np.sqrt(np.max(np.einsum("ij,ij->i", targets - last[ids], targets - last[ids]))))
+    if largest <= 0.0:
+        return last
+    return last + min(1.0, handles / largest) * motion
+
+
 class Binding:
     """Runtime side of one stored binding.
 
@@ -54,13 +76,13 @@ class Binding:
         self.last_step = None
         self._mirrors = {}
 
-    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None):
+    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, max_iter=None):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
         One :class:`DualLaplacian` is factored per set of ids (the last few are kept). With
-        ``follow`` the solve starts from the extrapolation 2 x_1 - x_2 of the last two solutions of
-        the same set (or from the last one), as a drag does, and stops after ``budget_ms``
-        (None: no limit); without it from rest, so the same handles give the same shape whatever
-        was solved before (Apply, bake)."""
+        ``follow`` the solve starts from :func:`follow_start` of the last two solutions of the
+        same set, as a drag does, and stops after ``budget_ms`` (None: no limit) or ``max_iter``
+        iterations (None: :data:`MAX_ITERATIONS`); without it from rest, so the same handles give
+        the same shape whatever was solved before (Apply, bake)."""
         key = (ids.tobytes(), bool(preserve_volume))
         if key not in self._solvers:
             if len(self._solvers) >= 8:
@@ -68,14 +90,10 @@ class Binding:
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume), []]
         solver, recent = self._solvers[key]
-        initial = None
-        if follow and recent:
-            # The targets moved on: extrapolate the motion; they stand still (a confirm): go on from the last.
-            moved = len(recent) == 2 and not np.array_equal(recent[0][ids], targets)
-            initial = 2.0 * recent[0] - recent[1] if moved else recent[0]
-        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
+        initial = follow_start(recent, ids, targets) if follow else None
+        result = solver.solve(targets, initial=initial, max_iter=max_iter or MAX_ITERATIONS, tol=tol,
                               budget_ms=budget_ms if follow else None)
-        self._solvers[key][1] = [result.vertices] + recent[:1]
+        self._solvers[key][1] = [result] + recent[:1]
         return result
 
     def mirror_map(self, axis):

@@ -23,9 +23,12 @@ from . import handles, mesh_io
 DRAG_TOL = 1e-8
 #: ... and when a result is kept (Apply, live update, confirm, bake).
 SETTLE_TOL = 1e-12
-#: Milliseconds a drag move's solve may start new iterations in; a move that cannot converge in
-#: them stops there and the next move continues from it.
-DRAG_BUDGET_MS = 16.0
+#: Milliseconds of solve in a drag move: about one Newton iteration at 1,000 proxy faces (its
+#: conjugate gradients stop at the deadline too), so a move costs little more than Blender's own
+#: stack; the next move, or the settle while the mouse rests, continues from where it stopped.
+DRAG_BUDGET_MS = 4.0
+#: Milliseconds of solve in one slice of the settle while the mouse rests (a TIMER event).
+SETTLE_SLICE_MS = 12.0
 
 
 def _hidden_by_user(obj):
@@ -76,6 +79,7 @@ class Deformation:
         self.obj = obj
         self.binding = stored.open_binding(obj)
         self.kept_symmetric = []
+        self.solved = None
         self.preserve_volume = bool(preserve_volume)
         self.proxy = self.binding.proxy
         m = self.binding.surface.proxy_vertices.shape[0]
@@ -89,9 +93,9 @@ class Deformation:
         """The handle and anchor empties of the object, sorted by name."""
         return handles.handles_of(self.obj, self.proxy)
 
-    def _solve_proxy(self, tol, follow=False, budget_ms=None):
+    def _solve_proxy(self, tol, follow=False, budget_ms=None, max_iter=None):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, rigid groups (m,)) from the
-        handles' transforms (``follow``, ``budget_ms``: see :meth:`Binding.solve_proxy`)."""
+        handles' transforms (``follow``, ``budget_ms``, ``max_iter``: see :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
         axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
@@ -101,27 +105,43 @@ class Deformation:
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        return axis, self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms), groups
+        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, max_iter)
+        #: The last solve's (symmetry axis, result, groups): what :meth:`commit` rebuilds from.
+        self.solved = (axis, result, groups)
+        return axis, result, groups
 
-    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None):
-        """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
-        last solves, within ``budget_ms``) and rebuild without writing anything. Returns the
-        :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail positions (a
-        buffer the next call reuses)."""
-        axis, result, groups = self._solve_proxy(tol, follow, budget_ms)
-        if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
-            self.binding.surface.forget_warm_start()
+    def _rebuild(self, axis, result, groups):
         detail = self.binding.rebuild(result.vertices, groups)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
-        return result, detail
+        return detail
 
-    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None):
+    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, max_iter=None):
+        """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
+        last solves, within ``budget_ms`` or ``max_iter``) and rebuild without writing anything.
+        Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
+        positions (a buffer the next call reuses)."""
+        axis, result, groups = self._solve_proxy(tol, follow, budget_ms, max_iter)
+        if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
+            self.binding.surface.forget_warm_start()
+        return result, self._rebuild(axis, result, groups)
+
+    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, max_iter=None):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
         binding (and, with ``mark``, the written digest: a drag marks only its last step, the
         confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
-        result, detail = self.solve(tol, follow, budget_ms)
+        result, detail = self.solve(tol, follow, budget_ms, max_iter)
+        return self._report(start, result, detail, mark)
+
+    def commit(self):
+        """Write the full detail rebuilt from the last solve (no new solve: what a drag showed,
+        settled, is what is kept), the proxy, and the written digest; a :class:`StepReport`."""
+        start = time.perf_counter()
+        axis, result, groups = self.solved
+        return self._report(start, result, self._rebuild(axis, result, groups), True)
+
+    def _report(self, start, result, detail, mark):
         self._write(detail, result.vertices, mark)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
@@ -133,7 +153,7 @@ class Deformation:
         """The preview object a drag may show instead of the mesh, or None."""
         return stored.preview_of(self.obj) if self.binding.preview is not None else None
 
-    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS):
+    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS, max_iter=None):
         """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
         shows the preview in place of the mesh (see :meth:`show_preview`). Returns a
         :class:`StepReport` whose positions are the preview's (c, 3)."""
@@ -142,7 +162,7 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, groups = self._solve_proxy(tol, follow, budget_ms)
+        _, result, groups = self._solve_proxy(tol, follow, budget_ms, max_iter)
         positions = self.binding.rebuild_preview(result.vertices, groups)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)

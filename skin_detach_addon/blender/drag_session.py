@@ -11,7 +11,7 @@ import math
 from mathutils import Matrix, Vector
 
 from ..core.errors import SkinDetachError
-from .deformation import DRAG_BUDGET_MS, DRAG_TOL, Deformation
+from .deformation import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
@@ -60,6 +60,13 @@ class DragSession:
     empties, the mesh and the proxy exactly as they were. A session ends with one of them:
     only the confirm records the written positions (moves skip that per-move checksum).
 
+    A move solves within :data:`DRAG_BUDGET_MS` and shows where it got. While the mouse rests,
+    TIMER events (the modal operator's window timer) go on with the same solve, a slice of the
+    same budget each, and show it, until it certifies to the settle tolerance: the header says
+    "settling", then "settled", and further TIMER events do nothing. The confirm of a settled
+    drag writes the shape shown (rebuilt in full detail from the same proxy when the preview
+    showed it); of an unsettled one, the solve continued to the settle tolerance first.
+
     A mesh of more than ``preview_above`` vertices (None: never) that has a preview object shows
     the preview while the mouse moves and the mesh itself is left alone; the confirm hides the
     preview and writes the full detail from a settled solve, the cancel hides it.
@@ -82,6 +89,8 @@ class DragSession:
         self._reference = Vector(mouse)
         self.step_ms = []
         self.last = None
+        #: The shown shape is the solve certified to the settle tolerance (nothing left to do).
+        self.settled = False
         #: Why the last keystroke was refused ("" when it was not).
         self.refused = ""
 
@@ -98,6 +107,8 @@ class DragSession:
             timing = f"{self.typed}{unit} typed, {timing}"
         if self.refused:
             timing = f"{self.refused} | {timing}"
+        if self.last is not None and not self.typed:
+            timing = f"{'settled' if self.settled else 'settling'}, {timing}"
         if self.deformation.kept_symmetric:
             timing = f"symmetric rig: the handle moves only symmetrically | {timing}"
         return (f"Skin Detach {self.mode.lower()}{axis}: {timing} | "
@@ -105,6 +116,9 @@ class DragSession:
 
     def event(self, kind, value, mouse):
         """Feed one event (Blender's type and value names); returns RUNNING_MODAL, FINISHED or CANCELLED."""
+        if kind == "TIMER":
+            self.settle_slice()
+            return RUNNING
         if kind == "MOUSEMOVE":
             if not self.typed:  # while a number is typed, the mouse does not move the handle
                 self._follow(Vector(mouse))
@@ -197,17 +211,30 @@ class DragSession:
 
     def _place(self, matrix):
         self.empty.matrix_world = matrix
-        if self.previewing:
-            self.last = self.deformation.preview_step(DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS)
-        else:  # the confirm marks (or the cancel restores)
-            self.last = self.deformation.step(DRAG_TOL, mark=False, follow=True, budget_ms=DRAG_BUDGET_MS)
+        self._show(DRAG_TOL, DRAG_BUDGET_MS)
         self.step_ms.append(self.last.milliseconds)
 
+    def _show(self, tol, budget_ms):
+        """Solve (following the last solves, within ``budget_ms``) and show the result."""
+        if self.previewing:
+            self.last = self.deformation.preview_step(tol, follow=True, budget_ms=budget_ms)
+        else:  # the confirm marks (or the cancel restores)
+            self.last = self.deformation.step(tol, mark=False, follow=True, budget_ms=budget_ms)
+        self.settled = tol == SETTLE_TOL and self.last.converged
+
+    def settle_slice(self):
+        """One slice of the settle while the mouse rests (a TIMER event): go on with the solve to
+        the settle tolerance within the move budget and show it; nothing once settled (or before
+        the first move). Returns whether the shown shape is settled."""
+        if self.last is not None and not self.settled:
+            self._show(SETTLE_TOL, SETTLE_SLICE_MS)
+        return self.settled
+
     def confirm(self):
-        """Keep the result: the last move's shape certified to the tight tolerance (continued from
-        it, so what the drag showed is what is written)."""
+        """Keep the result: a settled drag's shape as shown (in full detail), else the last
+        move's shape certified to the settle tolerance (continued from it)."""
         if self.last is not None:
-            self.last = self.deformation.step(follow=True)
+            self.last = self.deformation.commit() if self.settled else self.deformation.step(follow=True)
         return FINISHED
 
     def cancel(self):

@@ -75,7 +75,10 @@ def _digest(count, *arrays):
 
 
 def check_positions(name, positions):
-    """Raise :class:`SkinDetachError` unless ``positions`` (n, 3) are all finite."""
+    """Raise :class:`SkinDetachError` unless ``positions`` (n, 3) are all finite (one pass over the
+    buffer; the rows are looked at only to name a bad one)."""
+    if np.isfinite(positions).all():
+        return
     bad = ~np.isfinite(positions).all(axis=1)
     if bad.any():
         raise SkinDetachError(f"{name}: expected finite vertex positions, got {int(bad.sum())} vertices with NaN "

@@ -131,7 +131,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             y = solve_p(r)
             return y if tangent is None else tangent.project(y)
 
-        step, negative, steps = _newton_step(hessian, precondition, gradient)
+        step, negative, steps = _newton_step(hessian, precondition, gradient, deadline)
         proposed = largest_step(step, diagonal)
         slope = float(np.sum(gradient * step))
         if slope >= 0.0 or not np.isfinite(slope):
@@ -173,9 +173,10 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
     return NewtonResult(x, iterations, converged, history, energies)
 
 
-def _newton_step(hessian, precondition, gradient):
-    """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients.
-    Returns (p, whether negative curvature was met, the number of Hessian products)."""
+def _newton_step(hessian, precondition, gradient, deadline=None):
+    """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients,
+    stopped early past ``deadline`` (a time.perf_counter() value; every CG iterate is a descent
+    direction). Returns (p, whether negative curvature was met, the number of Hessian products)."""
     residual = -gradient
     z = precondition(residual)
     rz = float(np.sum(residual * z))
@@ -197,7 +198,7 @@ def _newton_step(hessian, precondition, gradient):
         residual = residual - alpha * product
         z = precondition(residual)
         rz_next = float(np.sum(residual * z))
-        if rz_next <= FORCING ** 2 * start:
+        if rz_next <= FORCING ** 2 * start or (deadline is not None and time.perf_counter() > deadline):
             break
         direction = z + (rz_next / rz) * direction
         rz = rz_next

@@ -9,6 +9,9 @@ from ..api import SkinDetachError
 from . import live_update
 from .region_view import RegionView
 
+#: Seconds between the TIMER events that settle a drag's solve while the mouse rests.
+SETTLE_INTERVAL_S = 0.02
+
 
 def bound_owner(context):
     """The bound mesh object behind the active object (itself, its proxy or a handle), or None."""
@@ -232,6 +235,8 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         context.area.header_text_set(self.session.header)
+        # TIMER events settle the solve while the mouse rests (removed whenever the drag ends).
+        self._timer = context.window_manager.event_timer_add(SETTLE_INTERVAL_S, window=context.window)
         context.window_manager.modal_handler_add(self)
         return {'RUNNING_MODAL'}
 
@@ -242,8 +247,12 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             self.session.cancel()
             self.report({'ERROR'}, str(exc))
             state = api.CANCELLED
+        except BaseException:
+            self._end_timer(context)
+            raise
         live_update.remember(self.session.obj)  # the drag solved this pose itself: live update keeps out
         if state in (api.FINISHED, api.CANCELLED):
+            self._end_timer(context)
             context.area.header_text_set(None)
             if state == api.FINISHED and self.session.step_ms:
                 ms = sorted(self.session.step_ms)[len(self.session.step_ms) // 2]
@@ -252,6 +261,11 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             return {state}
         context.area.header_text_set(self.session.header)
         return {'RUNNING_MODAL'}
+
+    def _end_timer(self, context):
+        if getattr(self, "_timer", None) is not None:
+            context.window_manager.event_timer_remove(self._timer)
+            self._timer = None
 
 
 class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
