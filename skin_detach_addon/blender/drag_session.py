@@ -214,12 +214,13 @@ class DragSession:
         self._show(DRAG_TOL, DRAG_BUDGET_MS)
         self.step_ms.append(self.last.milliseconds)
 
-    def _show(self, tol, budget_ms):
-        """Solve (following the last solves, within ``budget_ms``) and show the result."""
+    def _show(self, tol, budget_ms, idle=False):
+        """Solve (following the last solves, within ``budget_ms``; ``idle``: a settle slice, which
+        may also factor the Hessian the next moves precondition with) and show the result."""
         if self.previewing:
-            self.last = self.deformation.preview_step(tol, follow=True, budget_ms=budget_ms)
+            self.last = self.deformation.preview_step(tol, follow=True, budget_ms=budget_ms, idle=idle)
         else:  # the confirm marks (or the cancel restores)
-            self.last = self.deformation.step(tol, mark=False, follow=True, budget_ms=budget_ms)
+            self.last = self.deformation.step(tol, mark=False, follow=True, budget_ms=budget_ms, idle=idle)
         self.settled = tol == SETTLE_TOL and self.last.converged
 
     def settle_slice(self):
@@ -227,7 +228,7 @@ class DragSession:
         the settle tolerance within the move budget and show it; nothing once settled (or before
         the first move). Returns whether the shown shape is settled."""
         if self.last is not None and not self.settled:
-            self._show(SETTLE_TOL, SETTLE_SLICE_MS)
+            self._show(SETTLE_TOL, SETTLE_SLICE_MS, idle=True)
         return self.settled
 
     def confirm(self):

@@ -367,7 +367,7 @@ class DualLaplacian:
         out[self.free] = self._lu.solve(np.ascontiguousarray(gradient))
         return out
 
-    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None):
+    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None, idle=False):
         """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3).
 
         Without ``initial`` the solve starts from rest (the same constraints give the same shape
@@ -380,7 +380,9 @@ class DualLaplacian:
         when the largest squared move of a vertex in one iteration is at most ``tol``, or when
         :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
-        Either stops after ``max_iter`` iterations.
+        Either stops after ``max_iter`` iterations. ``idle`` ("rotated", with ``initial``): nobody
+        waits on this solve (a drag's settle while the mouse rests), so it may factor the Hessian
+        that preconditions the next solves (:class:`.hessian_factor.LaggedHessian`).
         """
         begun = time.perf_counter()
         targets = as_points("constrained_positions", constrained_positions, self.constrained.size)
@@ -405,7 +407,8 @@ class DualLaplacian:
                 self.energy_terms.reset()
                 self._lagged.reset()
             deadline = None if budget_ms is None else begun + budget_ms / 1000.0
-            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline)
+            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline,
+                                          bool(idle) and initial is not None)
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -460,7 +463,7 @@ class DualLaplacian:
         """K^-1 over the free vertices for ``values`` (f, j)."""
         return self._lu.solve(np.ascontiguousarray(values))
 
-    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline):
+    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline, refresh):
         """Where the constrained vertices jump far from ``start`` (their positions in the initial
         guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
         solved loosely from the last (continuation), so a start from rest lands on the minimum a
@@ -477,7 +480,7 @@ class DualLaplacian:
         for stage in range(1, stages):
             points[self.fixed] = start + (stage / stages) * (fixed_points - start)
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter, deadline, self._lagged)
+                              STAGE_TOL, max_iter, deadline, self._lagged, refresh)
             points = staged.points
             if deadline is not None and not staged.converged:
                 # Out of budget: the handles where they belong, the rest where the stages got to; the
@@ -487,7 +490,7 @@ class DualLaplacian:
                                            staged.history, staged.energy)
         points[self.fixed] = fixed_points
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
-                          max_iter, deadline, self._lagged)
+                          max_iter, deadline, self._lagged, refresh)
         return DualLaplacianResult(result.points, result.iterations, result.converged,
                                    self.volume_change(result.points), result.history, result.energy)
 

@@ -14,15 +14,14 @@ fixed: it is found once and each assembly fills its data with one batched produc
 A factor of H at one iterate preconditions the conjugate gradients of the next ones (a drag's
 moves change H a little at a time). H is factored without pivoting (the order keeps symmetry), so
 it is positive definite exactly when every pivot is positive; an indefinite H (past a fold) gives
-no factor and the caller keeps K's. Factoring runs without the GIL for most of its time, so a
-drag can make the next factor on another thread (:meth:`HessianFactor.factor` is pure).
+no factor and the caller keeps K's. A drag makes it while the mouse rests (a settle slice), never
+during a move: made on another thread beside the moves, its assembly held the GIL and the moves
+stalled by several milliseconds at random.
 """
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
-
-from .threads import pool
 
 
 class Factored:
@@ -77,8 +76,7 @@ class HessianFactor:
         return (2.0 * (self._gram - (q_matrix.T @ weighted))).tocsc()
 
     def factor(self, state):
-        """:class:`Factored` H at ``state``, or None when H is not positive definite. Changes
-        nothing on ``self``: safe to run on another thread while the caller goes on."""
+        """:class:`Factored` H at ``state``, or None when H is not positive definite."""
         if not self.size:
             return None
         try:
@@ -93,29 +91,24 @@ class HessianFactor:
 
 
 class LaggedHessian:
-    """The newest :class:`Factored` H a solve has asked for, kept across solves (a drag's moves):
-    :meth:`solver` gives its solve (None while there is none), :meth:`refresh` asks for one at a
-    new iterate, made on the core's thread pool and taken up by the first :meth:`solver` call
-    after it is done (the older factor serves until then)."""
+    """The newest :class:`Factored` H a solve has made, kept across solves (a drag's moves):
+    :meth:`solver` gives its solve (None while there is none), :meth:`refresh` makes one at a new
+    iterate (when H is indefinite there, the older factor stays)."""
 
     def __init__(self, hessian):
         self._hessian = hessian
         self._factored = None
-        self._pending = None
 
     def reset(self):
-        """Forget the factor and any pending one (the next solve starts as a fresh object's would)."""
-        self._factored, self._pending = None, None
+        """Forget the factor (the next solve starts as a fresh object's would)."""
+        self._factored = None
 
     def solver(self):
         """The held factor's solve ((f, 3) -> (f, 3)), or None."""
-        if self._pending is not None and self._pending.done():
-            done, self._pending = self._pending, None
-            self._factored = done.result()
         return None if self._factored is None else self._factored.solve
 
     def refresh(self, state):
-        """Ask for H at ``state`` (an EnergyState), unless one is still being made."""
-        if self._pending is None:
-            state.twists  # made here: the state is read-only from now on
-            self._pending = pool().submit(self._hessian.factor, state)
+        """Factor H at ``state`` (an EnergyState) and hold it, unless it is not positive definite."""
+        factored = self._hessian.factor(state)
+        if factored is not None:
+            self._factored = factored

@@ -34,9 +34,9 @@ import numpy as np
 FORCING = 0.05
 #: ... or after this many iterations.
 CG_ITERATIONS = 200
-#: In a solve with a deadline, more CG steps than this ask for a new factor of the Hessian, made on
-#: the thread pool (free for the drag's moves; made at once it would cost about 15 CG steps at
-#: 1,000 faces and 25 at 5,000, more than it saves in a settle).
+#: In a solve that may refresh the lagged Hessian (a drag's settle while the mouse rests), more CG
+#: steps than this make a new factor (about 15 CG steps' cost at 1,000 faces and 25 at 5,000: more
+#: than it saves within one settle, so a settle without a drag never makes one).
 REFRESH_STEPS = 4
 #: Armijo's sufficient decrease, and the halvings of the step at most.
 ARMIJO = 1e-4
@@ -93,16 +93,17 @@ class _Tangent:
         return out
 
 
-def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None, lagged=None):
+def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None, lagged=None,
+             refresh=False):
     """Projected Newton (module docstring) from ``points`` (m, 3), whose free rows are the start
     and whose other rows are held. ``volume``: a VolumeConstraint with at least one kept component,
     or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``deadline``: a
     time.perf_counter() value no iteration should end after (one that would, taking as long as
     the last, is not started; the first always runs); ``lagged``: a
     :class:`.hessian_factor.LaggedHessian` whose factor preconditions instead of K's when it has
-    one; with a deadline, it is refreshed on the thread pool at the step accepted after CG needed
-    more than :data:`REFRESH_STEPS` steps (without one, the solve never asks for a factor, so it is a
-    function of its start and the factor it is given). Returns :class:`NewtonResult`."""
+    one; with ``refresh``, it is made anew at the step accepted after CG needed more than
+    :data:`REFRESH_STEPS` steps (without, the solve is a function of its start and the factor it
+    is given). Returns :class:`NewtonResult`."""
     x = points.copy()
     m = x.shape[0]
     if volume is not None:
@@ -160,7 +161,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
         moved = largest_step(accepted.points[free] - x[free], diagonal)
         x, state = accepted.points, accepted
         # A Hessian with negative curvature would not factor positive definite: no refresh then.
-        if deadline is not None and lagged is not None and not negative and steps > REFRESH_STEPS:
+        if refresh and lagged is not None and not negative and steps > REFRESH_STEPS:
             lagged.refresh(state)
         history.append(moved)
         energies.append(state.energy)
