@@ -19,8 +19,9 @@ then confirms. Figures:
   jump between the mesh after the rest and after the confirm, over the diagonal; confirm ms;
 - Blender's stack (Decimate to the same face count + Hook + Laplacian Deform + Surface Deform)
   stepped through the same turn in the same process: step ms (median, p95), whether it moved the
-  mesh at all (Laplacian Deform refuses some decimated proxies: then its step is a no-op's cost
-  and no ratio is given), and our p95 over its p95.
+  mesh between anchors and handle (Laplacian Deform refuses some decimated proxies, "The system
+  did not find a solution": then only the hooked part moves, its step is a no-op's cost and no
+  ratio is given), and our p95 over its p95.
 """
 
 import argparse
@@ -163,8 +164,12 @@ def stack_drag(points, triangles, faces, axis, scenario, moves):
         empty.matrix_world = Matrix(turn_matrix(axis, pivot, math.radians(90.0) * k / moves).tolist())
         bpy.context.view_layer.update()
         times.append(1000 * (time.perf_counter() - begun))
-    moved = float(np.abs(blender_stack.evaluated_positions(obj) - points).max()) / float(np.linalg.norm(np.ptp(points, axis=0)))
-    return {"step_ms_median": float(np.median(times)), "step_ms_p95": percentile(times, 95), "moved": moved > 1e-3}
+    # Moved: the detail between the anchors and the handle followed (a Laplacian Deform that found
+    # no solution leaves its proxy's free part, and so that band, at rest: only the hook moves).
+    middle = np.setdiff1d(np.arange(points.shape[0]), np.concatenate([scenario.anchor_ids, scenario.handle_ids]))
+    shift = np.linalg.norm(blender_stack.evaluated_positions(obj)[middle] - points[middle], axis=1).max()
+    moved = float(shift) / float(np.linalg.norm(np.ptp(points, axis=0))) > 1e-3
+    return {"step_ms_median": float(np.median(times)), "step_ms_p95": percentile(times, 95), "moved": moved}
 
 
 def main():

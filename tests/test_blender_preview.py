@@ -75,6 +75,30 @@ def test_preview_drag_leaves_the_mesh_alone_and_confirm_writes_the_settled_detai
     assert np.abs(mesh_io.read_positions(obj.data) - confirmed).max() <= 1e-5 * _diagonal(obj)
 
 
+def test_a_preview_drag_settles_on_timer_events_and_its_confirm_writes_that_shape_in_full_detail(scene):
+    obj, handle = _rigged(scene)
+    preview = binding.preview_of(obj)
+    before = mesh_io.read_positions(obj.data).copy()
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    for _ in range(100):
+        if session.settled:
+            break
+        session.event("TIMER", "NOTHING", (130, 80))
+    assert session.settled and "settled" in session.header
+    assert np.array_equal(mesh_io.read_positions(obj.data), before)   # the preview settled, not the mesh
+    proxy = binding.proxy_of(obj)
+    settled_proxy = mesh_io.read_positions(proxy.data).copy()
+    assert session.event("RET", "PRESS", (130, 80)) == FINISHED
+    assert preview.hide_viewport and not obj.hide_viewport
+    assert np.array_equal(mesh_io.read_positions(proxy.data), settled_proxy)  # no new solve: the shape shown
+    confirmed = mesh_io.read_positions(obj.data)
+    assert np.abs(confirmed - before).max() > 0.05
+    binding.open_binding(obj).forget_warm_starts()
+    api.deform(obj)                                           # a cold settle of the same pose agrees
+    assert np.abs(mesh_io.read_positions(obj.data) - confirmed).max() <= 1e-5 * _diagonal(obj)
+
+
 def test_preview_cancel_restores_everything_bit_exact(scene):
     obj, handle = _rigged(scene)
     obj.hide_viewport = True  # hidden by the user before the drag: stays hidden
