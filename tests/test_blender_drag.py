@@ -165,21 +165,23 @@ def test_the_object_menus_list_every_operator(scene):
         assert menus._menu_entry in getattr(bpy.types, name)._dyn_ui_initialize()
 
 
-def _one_iteration_moves(monkeypatch):
-    """Moves that stop after one Newton iteration, as on a large proxy (the first always runs)."""
+def _quick_turn(monkeypatch):
+    """(obj, session) after a quick R turn of spot's handle in moves that stop after one Newton
+    iteration each, as on a large proxy (the first always runs): the moves cannot keep up."""
     from skin_detach_addon.blender import drag_session
     monkeypatch.setattr(drag_session, "DRAG_BUDGET_MS", 1e-6)
-
-
-def test_timer_events_settle_the_drag_while_the_mouse_rests_and_confirm_writes_what_was_shown(scene, monkeypatch):
-    from skin_detach_addon.blender.deformation import Deformation
-    _one_iteration_moves(monkeypatch)
     obj = import_spot()
     handle = rig(obj, axis=1)
     session = DragSession(obj, handle, TopView(0.01), (0, 0))
     session.event("R", "PRESS", (0, 0))
-    for k in range(1, 9):                                    # a quick turn: moves cannot keep up
+    for k in range(1, 9):
         session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    return obj, session
+
+
+def test_timer_events_settle_the_drag_while_the_mouse_rests_and_confirm_writes_what_was_shown(scene, monkeypatch):
+    from skin_detach_addon.blender.deformation import Deformation
+    obj, session = _quick_turn(monkeypatch)
     assert not session.settled and "settling" in session.header
     moves = len(session.step_ms)
     for _ in range(200):
@@ -197,19 +199,14 @@ def test_timer_events_settle_the_drag_while_the_mouse_rests_and_confirm_writes_w
 
 
 def test_a_drag_confirmed_before_it_settled_is_settled_by_the_confirm(scene, monkeypatch):
-    _one_iteration_moves(monkeypatch)
-    obj = import_spot()
-    handle = rig(obj, axis=1)
-    session = DragSession(obj, handle, TopView(0.01), (0, 0))
-    session.event("R", "PRESS", (0, 0))
-    for k in range(1, 9):
-        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    _, session = _quick_turn(monkeypatch)
     assert not session.settled
     assert session.event("RET", "PRESS", (-160, 100)) == FINISHED and session.last.converged
 
 
 def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_restores_bit_exact(scene, monkeypatch):
-    _one_iteration_moves(monkeypatch)
+    from skin_detach_addon.blender import drag_session
+    monkeypatch.setattr(drag_session, "DRAG_BUDGET_MS", 1e-6)
     obj = import_spot()
     handle = rig(obj, axis=1)
     before = _state(obj)

@@ -122,13 +122,18 @@ def test_a_refreshed_factor_is_held_and_a_reset_forgets_it(spot_proxy):
     assert lagged.solver() is None
 
 
-def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy):
-    from skin_detach_addon.core.projected_newton import _newton_step
+def _bent_start(spot_proxy):
+    """(solver, targets, start): the bend's solver and targets, and rest with the handles moved."""
     points, tris = spot_proxy
     ids, targets = bend(points)
-    solver = DualLaplacian(points, tris, ids)
-    x = points.copy()
-    x[ids] = targets
+    start = points.copy()
+    start[ids] = targets
+    return DualLaplacian(points, tris, ids), targets, start
+
+
+def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy):
+    from skin_detach_addon.core.projected_newton import _newton_step
+    solver, targets, x = _bent_start(spot_proxy)
     state = solver.energy_terms.at(x)
     free = solver.free
     gradient = state.gradient[free]
@@ -150,11 +155,8 @@ def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy
 
 
 def test_only_an_idle_solve_makes_the_hessian_factor_the_next_moves_precondition_with(spot_proxy):
-    points, tris = spot_proxy
-    ids, targets = bend(points)
-    solver = DualLaplacian(points, tris, ids)
-    start = points.copy()
-    start[ids] = targets
+    points = spot_proxy[0]
+    solver, targets, start = _bent_start(spot_proxy)
     moved = solver.solve(targets, initial=start, max_iter=100, tol=1e-12, budget_ms=1e3)
     assert moved.converged and solver._lagged.solver() is None   # a drag move never stalls on a factor
     settled = solver.solve(targets, initial=start, max_iter=100, tol=1e-12, budget_ms=1e3, idle=True)
