@@ -31,7 +31,7 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
+           "bake_file_path", "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
@@ -305,9 +305,15 @@ def selected_vertices(context):
 
 
 def frame_list(frames):
-    """``frames`` (``"1-250"``, ``"1-10,20"`` or an iterable of ints) as a list of distinct frame
-    numbers in order; absurd ranges are refused (see :func:`bake`)."""
+    """``frames`` (``"1-250"``, ``"1-10,20"``, ``"1..250"``, ``"1-250:5"`` or an iterable of ints)
+    as a list of distinct frame numbers in order; absurd ranges are refused (see :func:`bake`)."""
     return baking.check_frames(frames)
+
+
+def bake_file_path(pattern, frame):
+    """The file :func:`bake` writes ``frame`` to for ``pattern`` (``"out/scan_####.obj"`` ->
+    ``"out/scan_0012.obj"``: the last run of ``#`` in the file name is the zero-padded frame)."""
+    return baking.file_path(pattern, frame)
 
 
 def check_output_file(argument, path):

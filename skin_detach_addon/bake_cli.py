@@ -11,8 +11,9 @@ With the bpy module: python scripts/bake.py --blend scene.blend ARGS
 
 ARGS:
   --object NAME       the bound mesh (default: the only bound mesh in the file)
-  --frames 1-250      frames to bake: "1-250", "12" or "1-10,20" (default: the scene's range);
-                      split a long range across machines, each bakes its own part
+  --frames 1-250      frames to bake: "1-250", "12", "1-10,20", "1..250" or "1-250:5" (every
+                      5th), negative frames too (pass them as --frames=-3,-2); default: the
+                      scene's range; split a long range across machines, each bakes its own part
   --output PATH       "out/mesh_####.obj" or ".ply": one file per frame (#### = frame number,
                       UVs kept; OBJ keeps the vertex order); or "baked.blend": the result saved
                       in a copy of the scene, as shape keys (default) or one object per frame
@@ -22,6 +23,12 @@ ARGS:
                       --volume keep|free)
   --target-faces N    proxy size when the binding has to be built (default 1000)
   --rebuild           build the binding again even if the file has one
+  --farm              one chunk of a farm job: refuse outputs that chunks cannot share (a .blend)
+  --verify            solve nothing: check that every frame's file exists (a farm job's last
+                      task), exit 1 naming the missing frames
+
+Each baked frame prints a line starting "Time: MM:SS.ss" (the frame's time), which Flamenco's
+Worker counts as a finished step (as it does Blender's render lines), then "bake: frame N ...".
 
 The binding saved in the file is reused; it is built only when the mesh has none but has
 handles (a file from an older version). Re-running gives the same output. Exits 0 on success,
@@ -52,7 +59,7 @@ def parse_args(argv):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--blend", help="the .blend to open (bpy-module use; Blender opens it itself)")
     parser.add_argument("--object", help="name of the bound mesh object")
-    parser.add_argument("--frames", help="frames: 1-250, 12 or 1-10,20 (default: the scene's range)")
+    parser.add_argument("--frames", help="frames: 1-250, 12, 1-10,20, 1..250 or 1-250:5 (default: the scene's range)")
     parser.add_argument("--output", required=True, help="out/mesh_####.obj, out/mesh_####.ply or baked.blend")
     parser.add_argument("--into", choices=("shape-keys", "objects"), default="shape-keys")
     parser.add_argument("--apply-modifiers", action="store_true")
@@ -62,6 +69,8 @@ def parse_args(argv):
     parser.add_argument("--volume", choices=("keep", "free"), help="free = --no-volume")
     parser.add_argument("--target-faces", type=int, default=1000)
     parser.add_argument("--rebuild", action="store_true")
+    parser.add_argument("--farm", action="store_true", help="one chunk of a farm job: one file per frame only")
+    parser.add_argument("--verify", action="store_true", help="check that every frame's file exists; solve nothing")
     args = parser.parse_args(argv)
     args.apply_modifiers = args.apply_modifiers or args.modifiers == "apply"
     args.no_volume = args.no_volume or args.volume == "free"
@@ -118,6 +127,12 @@ def run(args):
         if not os.path.isfile(args.blend):
             raise BakeFailed(f"--blend: expected an existing .blend file, got {args.blend!r}")
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    to_blend = args.output.lower().endswith(".blend")
+    if to_blend and (args.farm or args.verify):
+        raise BakeFailed(f"--output: expected one .obj or .ply file per frame for a farm job (chunks cannot share "
+                         f"one .blend: each would overwrite it with its own frames), got {args.output!r}")
+    if args.verify:
+        return verify(bpy, api, args)
     source = bpy.data.filepath
     if source and os.path.exists(args.output) and os.path.samefile(args.output, source):
         raise BakeFailed(f"--output: expected a file other than the source .blend, got {args.output!r} (it would "
@@ -126,7 +141,6 @@ def run(args):
     obj = find_object(bpy, api, args.object)
     if bpy.context.view_layer.objects.active is None:
         bpy.context.view_layer.objects.active = obj
-    to_blend = args.output.lower().endswith(".blend")
     if to_blend:
         api.check_output_file("--output", args.output)
     frames = api.frame_list(args.frames or f"{scene.frame_start}-{scene.frame_end}")  # refused before any work
@@ -136,8 +150,9 @@ def run(args):
 
     def progress(done, total, record):
         warning = "" if record["converged"] else f" (warning: the solve did not converge in {record['iterations']} iterations)"
-        print(f"bake: frame {record['frame']} ({done}/{total}) solved in {record['milliseconds']:.1f} ms "
-              f"-> {record['output']}{warning}", flush=True)
+        seconds = record["milliseconds"] / 1000.0
+        print(f"Time: {int(seconds // 60):02d}:{seconds % 60:05.2f} | bake: frame {record['frame']} ({done}/{total}) "
+              f"solved in {record['milliseconds']:.1f} ms -> {record['output']}{warning}", flush=True)
 
     records = api.bake(obj, frames, into=into, path=None if to_blend else args.output,
                        preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress)
@@ -152,6 +167,18 @@ def run(args):
     seconds = time.perf_counter() - start
     print(f"bake: {len(records)} frames of {obj.name!r} ({len(obj.data.vertices):,} vertices) in {seconds:.1f} s"
           f"{' (binding built first)' if built else ''}; wrote {args.output}", flush=True)
+
+
+def verify(bpy, api, args):
+    """Every frame of ``--frames`` (default: the scene's range) has its file: else BakeFailed."""
+    scene = bpy.context.scene
+    frames = api.frame_list(args.frames or f"{scene.frame_start}-{scene.frame_end}")
+    missing = [f for f in frames if not os.path.isfile(api.bake_file_path(args.output, f))]
+    if missing:
+        shown = ", ".join(map(str, missing[:20])) + (" ..." if len(missing) > 20 else "")
+        raise BakeFailed(f"--output: expected a file for each of the {len(frames)} frames, {len(missing)} are "
+                         f"missing (frames {shown})")
+    print(f"bake: all {len(frames)} files of {args.output} are there", flush=True)
 
 
 def main(argv=None):

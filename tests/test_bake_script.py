@@ -153,3 +153,46 @@ def test_a_frame_whose_file_is_missing_after_the_bake_fails_the_bake(rig_file, t
     with pytest.raises(SystemExit) as stop:
         bake_cli.main(["--blend", str(rig_file), "--frames", "1-3", "--output", str(tmp_path / "f_####.obj")])
     assert stop.value.code == 1 and "missing frames: [2]" in capsys.readouterr().err
+
+
+def test_every_baked_frame_prints_a_line_flamencos_worker_counts_as_a_step(rig_file, tmp_path):
+    import re
+    step = re.compile(r"(?:^|(?:render\s+\|\s+))Time: ([0-9:.]+)")  # internal/worker/command_blender.go
+    run = bake("--blend", rig_file, "--frames=1-4:3", "--output", tmp_path / "s_####.obj")
+    assert run.returncode == 0, run.stderr
+    assert len([line for line in run.stdout.splitlines() if step.search(line)]) == 2  # frames 1 and 4
+    assert sorted(p.name for p in tmp_path.glob("s_*.obj")) == ["s_0001.obj", "s_0004.obj"]
+
+
+def test_a_farm_chunk_refuses_a_blend_and_verify_names_the_missing_frames(rig_file, tmp_path):
+    run = bake("--blend", rig_file, "--frames=1-2", "--output", tmp_path / "all.blend", "--farm")
+    assert run.returncode == 1 and "one .obj or .ply file per frame" in run.stderr
+    assert not (tmp_path / "all.blend").exists()
+    run = bake("--blend", rig_file, "--frames=-1,0", "--output", tmp_path / "v_####.obj", "--farm")
+    assert run.returncode == 0, run.stderr                   # negative frames, passed as --frames=
+    assert bake("--blend", rig_file, "--frames=-1,0", "--output", tmp_path / "v_####.obj", "--verify").returncode == 0
+    (tmp_path / "v_-001.obj").unlink()
+    run = bake("--blend", rig_file, "--frames=-1,0", "--output", tmp_path / "v_####.obj", "--verify")
+    assert run.returncode == 1 and "1 are missing (frames -1)" in run.stderr
+
+
+def test_two_bakes_of_one_frame_into_one_folder_do_not_collide(rig_file, tmp_path, monkeypatch):
+    """A second bake of the frame (a requeued task whose first Worker still runs) finishes while
+    the first one is exporting: neither may take or rename the other's partial file."""
+    from skin_detach_addon import api
+    from skin_detach_addon.blender import baking, mesh_io
+    bpy.ops.wm.open_mainfile(filepath=str(rig_file))
+    obj = bpy.data.objects["quads"]
+    export = baking._FileWriter._export
+    pattern = str(tmp_path / "c_####.obj")
+    inner = []
+
+    def meanwhile(writer, path, obj_format):
+        export(writer, path, obj_format)
+        if not inner:                                         # the other bake writes the same frame now
+            inner.append(None)
+            inner[0] = baking._FileWriter(obj, pattern, False).write(2, mesh_io.read_positions(obj.data))
+    monkeypatch.setattr(baking._FileWriter, "_export", meanwhile)
+    records = api.bake(obj, [2], into=api.FILES, path=pattern)
+    assert inner == [records[0]["output"]] and (tmp_path / "c_0002.obj").stat().st_size > 0
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no partial file left

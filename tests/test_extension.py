@@ -167,20 +167,32 @@ def worker(extension_zip, tmp_path_factory):
     return folder, env, stand_in, folder / "rig.blend"
 
 
+def openjd_run(worker, folder, *parameters, env=None):
+    """``openjd run`` of the template on the worker stand-in with the rig and ``parameters``
+    ("Name=value"; chunks of 4 unless given)."""
+    openjd = pathlib.Path(sys.executable).parent / "openjd"
+    _, worker_env, stand_in, rig = worker
+    given = {p.split("=", 1)[0] for p in parameters}
+    parameters = [*parameters, *(["ChunkSize=4"] if "ChunkSize" not in given else [])]
+    line = [str(openjd), "run", str(ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"), "-p", f"BlendFile={rig}",
+            "-p", f"BlenderExecutable={stand_in}"]
+    for parameter in parameters:
+        line += ["-p", parameter]
+    return subprocess.run(line, cwd=folder, env=env or worker_env, capture_output=True, text=True, timeout=1200)
+
+
 def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(worker, tmp_path):
     pytest.importorskip("openjd")
     openjd = pathlib.Path(sys.executable).parent / "openjd"
-    _, env, stand_in, rig = worker
+    env = worker[1]
     template = ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"
     check = subprocess.run([str(openjd), "check", str(template)], capture_output=True, text=True, timeout=120)
     assert check.returncode == 0, check.stdout + check.stderr
-    run = subprocess.run([str(openjd), "run", str(template), "-p", f"BlendFile={rig}",
-                          "-p", f"OutputPattern={tmp_path / 'farm' / 'f_####.obj'}", "-p", "Frames=1-30",
-                          "-p", "ChunkSize=4", "-p", f"BlenderExecutable={stand_in}"],
-                         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=1200)
+    run = openjd_run(worker, tmp_path, "Frames=1-30", f"OutputFolder={tmp_path / 'farm'}", "OutputFile=f_####.obj")
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
-    assert "Chunks run: 8" in run.stdout and run.stdout.count("bake: error") == 0
-    one = subprocess.run([str(stand_in), "-b", str(rig), *BAKE_ARGS, "--",
+    assert "Chunks run: 9" in run.stdout and run.stdout.count("bake: error") == 0  # 8 chunks, then Verify
+    assert "bake: all 30 files" in run.stdout                 # the Verify step
+    one = subprocess.run([str(worker[2]), "-b", str(worker[3]), *BAKE_ARGS, "--",
                           "--frames", "1-30", "--output", str(tmp_path / "one" / "f_####.obj")],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert one.returncode == 0, one.stdout[-2000:] + one.stderr[-2000:]
@@ -190,27 +202,39 @@ def test_openjd_runs_the_template_in_chunks_byte_identical_to_one_process(worker
     assert farm == single
 
 
-def test_the_flamenco_job_types_command_runs_on_a_worker_with_only_the_extension(worker, tmp_path):
+def test_the_flamenco_job_types_commands_run_on_a_worker_with_only_the_extension(worker, tmp_path):
     import json
+    import re
     import shutil
     node = shutil.which("node")
     if node is None:
         pytest.skip("no node to run the Flamenco job compiler stand-in")
     _, env, stand_in, rig = worker
-    settings = {"frames": "1-250", "chunk_size": 10, "object": "scan", "output_folder": str(tmp_path / "bake"),
+    settings = {"frames": "1-10", "chunk_size": 5, "object": "scan", "output_folder": str(tmp_path / "bake"),
                 "format": ".obj", "apply_modifiers": False, "preserve_volume": True, "blendfile": str(rig)}
     compiled = subprocess.run([node, str(ROOT / "tests" / "farm" / "flamenco_stand_in.js"),
                                str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings), "s010"],
                               capture_output=True, text=True, timeout=60)
     assert compiled.returncode == 0, compiled.stderr
     tasks = json.loads(compiled.stdout)
-    assert len(tasks) == 25
-    command = tasks[0]["commands"][0]["parameters"]
-    # The Worker runs: exe exeArgs argsBefore blendfile args, with {blender} and {blenderArgs} expanded.
-    line = [str(stand_in), "-b", "-y", *command["argsBefore"], command["blendfile"], *command["args"]]
-    run = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert [t["name"] for t in tasks] == ["bake-1-5", "bake-6-10", "verify-files"]
+    step = re.compile(r"(?:^|(?:render\s+\|\s+))Time: ([0-9:.]+)")  # the Worker's step counter
+
+    def run_task(task):
+        command = task["commands"][0]["parameters"]
+        # The Worker runs: exe exeArgs argsBefore blendfile args, with {blender} and {blenderArgs} expanded.
+        line = [str(stand_in), "-b", "-y", *command["argsBefore"], command["blendfile"], *command["args"]]
+        return subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    for task in tasks[:2]:
+        run = run_task(task)
+        assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+        steps = [line for line in run.stdout.splitlines() if step.search(line)]
+        assert len(steps) == task["commands"][0]["totalStepCount"] == 5   # a finished step per frame
     assert sorted(p.name for p in (tmp_path / "bake").iterdir()) == [f"s010_rig_{k:04d}.obj" for k in range(1, 11)]
+    assert run_task(tasks[2]).returncode == 0
+    (tmp_path / "bake" / "s010_rig_0007.obj").unlink()
+    run = run_task(tasks[2])
+    assert run.returncode == 1 and "missing (frames 7)" in run.stderr
 
 
 def test_a_worker_without_the_extension_fails_its_tasks_in_flamenco_and_openjd(worker, tmp_path):
@@ -229,11 +253,21 @@ def test_a_worker_without_the_extension_fails_its_tasks_in_flamenco_and_openjd(w
         line = [str(stand_in), "-b", "-y", *command["argsBefore"], command["blendfile"], *command["args"]]
         run = subprocess.run(line, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
         assert run.returncode != 0 and "extension is not enabled" in run.stderr, run.stdout[-2000:] + run.stderr[-2000:]
-    openjd = pathlib.Path(sys.executable).parent / "openjd"
-    if openjd.exists():
-        run = subprocess.run([str(openjd), "run", str(ROOT / "farm" / "openjd" / "skin_detach_bake.yaml"),
-                              "-p", f"BlendFile={rig}", "-p", f"OutputPattern={tmp_path / 'jd' / 'f_####.obj'}",
-                              "-p", "Frames=1-4", "-p", "ChunkSize=4", "-p", f"BlenderExecutable={stand_in}"],
-                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    if (pathlib.Path(sys.executable).parent / "openjd").exists():
+        run = openjd_run(worker, tmp_path, "Frames=1-4", f"OutputFolder={tmp_path / 'jd'}", "OutputFile=f_####.obj",
+                         env=env)
         assert run.returncode != 0 and "extension is not enabled" in run.stdout, run.stdout[-3000:]
     assert not (tmp_path / "bake").exists() and not (tmp_path / "jd").exists()
+
+
+def test_openjd_stepped_and_negative_frames_bake_and_a_blend_output_is_refused(worker, tmp_path):
+    pytest.importorskip("openjd")
+    # Evenly spaced frames reach the task as a stepped range ("-3-3:2"), negative ones as "-3,...".
+    run = openjd_run(worker, tmp_path, "Frames=-3,-1,1,3", f"OutputFolder={tmp_path / 'out'}", "OutputFile=s_####.ply")
+    assert run.returncode == 0, run.stdout[-3000:]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["s_-001.ply", "s_-003.ply", "s_0001.ply",
+                                                                     "s_0003.ply"]
+    run = openjd_run(worker, tmp_path, "Frames=1-4", "ChunkSize=2", f"OutputFolder={tmp_path / 'b'}",
+                     "OutputFile=all.blend")
+    assert run.returncode != 0 and "one .obj or .ply file per frame" in run.stdout, run.stdout[-3000:]
+    assert not (tmp_path / "b" / "all.blend").exists()

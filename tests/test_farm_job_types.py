@@ -30,12 +30,12 @@ def test_every_chunk_parses_with_the_bake_cli_and_together_they_cover_each_frame
                               capture_output=True, text=True, timeout=60)
     assert compiled.returncode == 0, compiled.stderr
     covered = []
-    for task in json.loads(compiled.stdout):
-        args = task["commands"][0]["parameters"]["args"]
-        chunk = parse_frames(args[args.index("--frames") + 1])
+    for task in json.loads(compiled.stdout)[:-1]:           # the last task checks the files
+        args = dict(a.split("=", 1) for a in task["commands"][0]["parameters"]["args"] if a.startswith("--") and "=" in a)
+        chunk = parse_frames(args["--frames"])
         assert task["commands"][0]["totalStepCount"] == len(chunk) <= size
         covered += chunk
-        assert args[args.index("--modifiers") + 1] == "apply" and args[args.index("--volume") + 1] == "free"
+        assert args["--modifiers"] == "apply" and args["--volume"] == "free"
     expected = parse_frames(frames.replace("..", "-"))
     assert covered == expected and len(set(covered)) == len(covered)
 
@@ -49,6 +49,7 @@ def test_both_job_types_make_blender_fail_on_any_error_and_find_the_addon_in_any
                                str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings)],
                               capture_output=True, text=True, timeout=60)
     flamenco = json.loads(compiled.stdout)[0]["commands"][0]["parameters"]["args"]
+    assert json.loads(compiled.stdout)[-1]["name"] == "verify-files"
     template = yaml.safe_load((ROOT / "farm" / "openjd" / "skin_detach_bake.yaml").read_text())
     openjd = template["steps"][0]["script"]["actions"]["onRun"]["args"]
     for args in (flamenco, openjd):
@@ -56,3 +57,18 @@ def test_both_job_types_make_blender_fail_on_any_error_and_find_the_addon_in_any
         start = args.index("--python-expr")
         assert args[start - 2:start] == ["--python-exit-code", "1"] and args[start + 1] == FARM_EXPR
     assert "user_default" not in FARM_EXPR and "sys.exit(" in FARM_EXPR
+    outputs = {p["name"]: p for p in template["parameterDefinitions"]}
+    assert outputs["OutputFolder"]["dataFlow"] == "OUT" and outputs["OutputFolder"]["objectType"] == "DIRECTORY"
+    assert [step["name"] for step in template["steps"]] == ["Bake", "Verify"]
+    for args in (flamenco, openjd):                          # --name=value: a leading dash stays a value
+        assert not {"--frames", "--output", "--object"} & set(args) and "--farm" in args
+
+
+@pytest.mark.parametrize("text, frames", [("1-7:2", [1, 3, 5, 7]), ("1-250:5", list(range(1, 251, 5))),
+                                          ("1..4", [1, 2, 3, 4]), ("-3,-2", [-3, -2]), ("-5--3", [-5, -4, -3]),
+                                          ("0-10:4,20", [0, 4, 8, 20])])
+def test_the_bake_cli_takes_blenders_and_openjds_range_syntax(text, frames):
+    pytest.importorskip("bpy")
+    from skin_detach_addon.blender.baking import parse_frames
+    assert parse_frames(text) == frames
+

@@ -23,14 +23,14 @@ const JOB_TYPE = {
       key: "frames", type: "string", required: true,
       eval: "f'{C.scene.frame_start}-{C.scene.frame_end}'",
       evalInfo: { showLinkButton: true, description: "Scene frame range" },
-      description: "Frames to bake, e.g. 1-250 or 1-10,20",
+      description: "Frames to bake, e.g. 1-250, 1..250 or 1-10,20",
     },
     {
       key: "chunk_size", type: "int32", default: 10, propargs: { min: 1, max: 1000 },
       description: "Frames per task",
     },
     {
-      key: "object", type: "string",
+      key: "object", type: "string", default: "",
       eval: "C.active_object.name if C.active_object else ''",
       evalInfo: { showLinkButton: true, description: "The active object" },
       description: "The bound mesh (or its proxy or a handle); empty: the only bound mesh in the file",
@@ -38,7 +38,8 @@ const JOB_TYPE = {
     {
       key: "output_folder", type: "string", subtype: "dir_path", required: true,
       eval: "str(Path(abspath('//'), 'skin_detach_bake', jobname))",
-      description: "Folder of the baked files",
+      description: "Folder of the baked files: an absolute path on the shared storage, or one that starts " +
+        "with a two-way variable such as {render}",
     },
     {
       key: "format", type: "string", required: true, default: ".obj", choices: FORMATS,
@@ -51,36 +52,108 @@ const JOB_TYPE = {
   ],
 };
 
+// A job bakes at most this many frames (as the bake CLI) in at most this many tasks.
+const MAX_FRAMES = 100000;
+const MAX_TASKS = 10000;
+
+/** The settings with every missing one at its declared default (the Manager's REST API does not
+ * apply them), checked; throws a message naming the setting. */
+function checkedSettings(given) {
+  const settings = {};
+  for (const spec of JOB_TYPE.settings) {
+    const value = given[spec.key];
+    settings[spec.key] = value === undefined || value === null ? spec.default : value;
+  }
+  for (const spec of JOB_TYPE.settings) {
+    const value = settings[spec.key];
+    const kind = { string: "string", int32: "number", float: "number", bool: "boolean" }[spec.type];
+    if (value === undefined && spec.required) {
+      throw "Skin Detach bake: " + spec.key + " is required (" + spec.description + ")";
+    }
+    if (value !== undefined && typeof value !== kind) {
+      throw "Skin Detach bake: " + spec.key + " must be a " + spec.type + ", got " + JSON.stringify(value);
+    }
+  }
+  return settings;
+}
+
+/** Throws unless ``text`` is a frame range Flamenco's chunker takes (1-250, 1..250, 1-10,20; no
+ * negative frames, no steps) of at most MAX_FRAMES frames. */
+function checkFrames(text) {
+  let count = 0;
+  for (const part of text.replace(/\s/g, "").split(",")) {
+    const match = /^(\d{1,9})(?:(?:-|\.\.)(\d{1,9}))?$/.exec(part);
+    if (!match) {
+      throw "Skin Detach bake: frames must be a frame range like 1-250, 1..250 or 1-10,20 (Flamenco's chunks " +
+        "take no negative frames and no steps), got " + JSON.stringify(text);
+    }
+    const first = Number(match[1]);
+    const last = match[2] === undefined ? first : Number(match[2]);
+    if (last < first) {
+      throw "Skin Detach bake: frames must not run backwards, got " + JSON.stringify(part);
+    }
+    count += last - first + 1;
+    if (count > MAX_FRAMES) {
+      throw "Skin Detach bake: frames must be at most " + MAX_FRAMES + " frames, got " + JSON.stringify(text);
+    }
+  }
+}
+
+/** Absolute on some platform (/x, C:/x or a drive and backslash, two backslashes and a server) or
+ * starting with a variable ({render}/x). */
+function isAbsolute(folder) {
+  return /^(\/|[A-Za-z]:[\\/]|\\\\|\{[A-Za-z0-9_]+\})/.test(folder);
+}
+
+/** ``text`` made safe for a file name: anything but letters, digits, dot, dash, underscore -> _. */
+function safeName(text) {
+  return String(text).replace(/[^A-Za-z0-9._-]+/g, "_");
+}
+
 function compileJob(job) {
-  const settings = job.settings;
+  const settings = checkedSettings(job.settings);
   if (FORMATS.indexOf(settings.format) < 0) {
     throw "Skin Detach bake: the farm writes one file per frame (.obj or .ply) so that chunks can run apart; " +
       "format " + JSON.stringify(settings.format) + " cannot be split (bake shape keys, objects or a .blend " +
       "on one machine with scripts/bake.py)";
   }
-  if (/\.blend$/i.test(settings.output_folder || "")) {
+  if (/\.blend$/i.test(settings.output_folder)) {
     throw "Skin Detach bake: output_folder must be a folder, got the .blend " + JSON.stringify(settings.output_folder) +
       " (a .blend output cannot be split across tasks)";
+  }
+  if (!isAbsolute(settings.output_folder)) {
+    throw "Skin Detach bake: output_folder must be an absolute path on the shared storage (or start with a " +
+      "two-way variable such as {render}), got " + JSON.stringify(settings.output_folder) +
+      " (a relative folder would land in each Worker's working folder)";
   }
   if (!settings.blendfile) {
     throw "Skin Detach bake: no .blend to bake (the Flamenco add-on fills in blendfile on submission)";
   }
   const size = settings.chunk_size;
-  if (!(size >= 1)) {
-    throw "Skin Detach bake: chunk_size must be at least 1, got " + size;
+  if (!(Number.isInteger(size) && size >= 1)) {
+    throw "Skin Detach bake: chunk_size must be a whole number of at least 1, got " + JSON.stringify(size);
   }
-  const stem = path.stem(settings.blendfile);
-  const pattern = path.join(settings.output_folder, job.name + "_" + stem + "_####" + settings.format);
-  for (const chunk of frameChunker(settings.frames, size)) {
+  checkFrames(settings.frames);
+  const chunks = frameChunker(settings.frames, size);
+  if (chunks.length > MAX_TASKS) {
+    throw "Skin Detach bake: " + chunks.length + " tasks is more than " + MAX_TASKS + "; raise chunk_size " +
+      "(Flamenco adds about 5 s a task)";
+  }
+  const stem = safeName(path.stem(settings.blendfile));
+  const pattern = path.join(settings.output_folder, safeName(job.name) + "_" + stem + "_####" + settings.format);
+  const head = ["--python-exit-code", "1", "--python-expr", BAKE_EXPR, "--"];
+  const bakes = [];
+  for (const chunk of chunks) {
     const task = author.Task("bake-" + chunk, "blender");
-    const args = [
-      "--python-exit-code", "1", "--python-expr", BAKE_EXPR, "--",
-      "--frames", chunk,
-      "--output", pattern,
-      "--object", settings.object || "",
-      "--modifiers", settings.apply_modifiers ? "apply" : "ignore",
-      "--volume", settings.preserve_volume ? "keep" : "free",
-    ];
+    // --name=value: a value starting with a dash (negative frames, an object named -scan) stays a value.
+    const args = head.concat([
+      "--frames=" + chunk,
+      "--output=" + pattern,
+      "--object=" + settings.object,
+      "--modifiers=" + (settings.apply_modifiers ? "apply" : "ignore"),
+      "--volume=" + (settings.preserve_volume ? "keep" : "free"),
+      "--farm",
+    ]);
     task.addCommand(author.Command("blender-render", {
       exe: "{blender}",
       exeArgs: "{blenderArgs}",
@@ -89,5 +162,19 @@ function compileJob(job) {
       args: args,
     }, frameCount(chunk)));
     job.addTask(task);
+    bakes.push(task);
   }
+  // The last task: every frame made its file (or the job fails, naming the missing frames).
+  const verify = author.Task("verify-files", "blender");
+  verify.addCommand(author.Command("blender-render", {
+    exe: "{blender}",
+    exeArgs: "{blenderArgs}",
+    argsBefore: [],
+    blendfile: settings.blendfile,
+    args: head.concat(["--frames=" + settings.frames, "--output=" + pattern, "--verify"]),
+  }, 1));
+  for (const task of bakes) {
+    verify.addDependency(task);
+  }
+  job.addTask(verify);
 }

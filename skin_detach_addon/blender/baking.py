@@ -9,8 +9,10 @@ the scene frame, the mesh and its shape keys are as they were before; a failed b
 removes the shape keys and objects it had added.
 """
 
+import itertools
 import os
 import re
+import socket
 import time
 
 from ..core.errors import SkinDetachError
@@ -32,24 +34,59 @@ FORMATS = (".obj", ".ply")
 
 #: A bake takes at most this many frames (a larger range is refused before any frame is solved).
 MAX_FRAMES = 100_000
+#: This process in the names of its partial files: host and process id (then a write counter).
+_PROCESS_TAG = f"{re.sub(r'[^A-Za-z0-9-]', '-', socket.gethostname())}-{os.getpid()}"
+_WRITES = itertools.count()
+
+
+def _remove_orphans(folder, name):
+    """Remove the partial files of ``name`` in ``folder`` left by processes of this host that are
+    gone (a killed bake); those of other hosts, or of live processes, are left alone."""
+    prefix = f".{name}."
+    host = _PROCESS_TAG.rsplit("-", 1)[0]
+    for entry in os.listdir(folder):
+        match = re.fullmatch(re.escape(prefix) + r"(.+)-(\d+)-\d+\.partial\.\w+", entry)
+        if match is None or match.group(1) != host or int(match.group(2)) == os.getpid():
+            continue
+        if not _alive(int(match.group(2))):
+            try:
+                os.remove(os.path.join(folder, entry))
+            except OSError:
+                pass
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # no permission, or no such check here: count it as alive
+        return True
+    return True
 
 
 def parse_frames(text):
-    """Frame numbers from ``"1-250"``, ``"12"`` or ``"1-10,20,30-40"`` (inclusive, in order, no
-    repeats); at most :data:`MAX_FRAMES` of them."""
+    """Frame numbers from ``"1-250"``, ``"12"``, ``"1-10,20,30-40"``, Blender's ``"1..250"`` or
+    a stepped range ``"1-250:5"`` (as Open Job Description writes evenly spaced chunks: 1, 6, ...,
+    246); frames may be negative (``"-3,-2"``, ``"-10--5"``). Inclusive, in order, no repeats; at
+    most :data:`MAX_FRAMES` of them."""
     frames, seen, work = [], set(), 0
     for part in str(text).replace(" ", "").split(","):
-        match = re.fullmatch(r"(-?\d{1,9})(?:-(-?\d{1,9}))?", part)
+        match = re.fullmatch(r"(-?\d{1,9})(?:(?:-|\.\.)(-?\d{1,9})(?::(\d{1,9}))?)?", part)
         if match is None:
-            raise SkinDetachError(f"frames: expected a frame or range like '1-250' or '1-10,20', got {text!r}")
+            raise SkinDetachError(f"frames: expected a frame or range like '1-250', '1..250', '1-250:5' or "
+                                  f"'1-10,20', got {text!r}")
         first = int(match.group(1))
         last = int(match.group(2)) if match.group(2) is not None else first
+        step = int(match.group(3)) if match.group(3) is not None else 1
         if last < first:
             raise SkinDetachError(f"frames: expected a range that does not run backwards, got {part!r}")
-        work += last - first + 1
-        if last - first + 1 > MAX_FRAMES or work > 10 * MAX_FRAMES:
+        if step < 1:
+            raise SkinDetachError(f"frames: expected a step of at least 1, got {part!r}")
+        work += (last - first) // step + 1
+        if (last - first) // step + 1 > MAX_FRAMES or work > 10 * MAX_FRAMES:
             raise SkinDetachError(f"frames: expected at most {MAX_FRAMES:,} frames, got {text!r}")
-        for frame in range(first, last + 1):
+        for frame in range(first, last + 1, step):
             if frame not in seen:
                 seen.add(frame)
                 frames.append(frame)
@@ -261,12 +298,23 @@ class _FileWriter:
     def write(self, frame, detail):
         """Export to a hidden partial file beside the target, then rename it over the target: a
         frame's file is complete or absent, whenever the process is stopped (a re-run replaces
-        it and its partial file)."""
-        import bpy
+        it and removes the partial files killed bakes of this host left)."""
         target = os.path.abspath(file_path(self.pattern, frame))
         folder, name = os.path.split(target)
-        partial = os.path.join(folder, f".{name}.partial{os.path.splitext(name)[1]}")
+        # Unique to this write: two bakes of one frame into one folder (a requeued task whose
+        # first Worker still runs) never write or rename each other's partial file.
+        partial = os.path.join(folder, f".{name}.{_PROCESS_TAG}-{next(_WRITES)}.partial{os.path.splitext(name)[1]}")
         mesh_io.write_positions(self.obj.data, detail)
+        self._export(partial, target.lower().endswith(".obj"))
+        if not os.path.isfile(partial):
+            raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
+        os.replace(partial, target)
+        _remove_orphans(folder, name)
+        return target
+
+    def _export(self, path, obj_format):
+        """Export the object alone to ``path`` (OBJ when ``obj_format``, else PLY), with UVs."""
+        import bpy
         view_layer = bpy.context.view_layer
         selected = [o for o in view_layer.objects if o.select_get()]
         active = view_layer.objects.active
@@ -279,22 +327,17 @@ class _FileWriter:
                 raise SkinDetachError(f"object {self.obj.name!r}: expected it in the view layer to export it, "
                                       f"its collection is excluded") from None
             view_layer.objects.active = self.obj
-            if target.lower().endswith(".obj"):
-                bpy.ops.wm.obj_export(filepath=partial, check_existing=False, export_selected_objects=True,
-                                      export_uv=True, export_materials=False,
-                                      apply_modifiers=self.apply_modifiers)
+            if obj_format:
+                bpy.ops.wm.obj_export(filepath=path, check_existing=False, export_selected_objects=True,
+                                      export_uv=True, export_materials=False, apply_modifiers=self.apply_modifiers)
             else:
-                bpy.ops.wm.ply_export(filepath=partial, check_existing=False, export_selected_objects=True,
+                bpy.ops.wm.ply_export(filepath=path, check_existing=False, export_selected_objects=True,
                                       export_uv=True, apply_modifiers=self.apply_modifiers)
         finally:
             self.obj.select_set(False)
             for o in selected:
                 o.select_set(True)
             view_layer.objects.active = active
-        if not os.path.isfile(partial):
-            raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
-        os.replace(partial, target)
-        return target
 
     def undo(self):
         pass
