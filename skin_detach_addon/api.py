@@ -24,6 +24,7 @@ from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
 from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession
 from .blender.skin_rig import PREVIEW_ABOVE
+from .core import threads
 from .core.errors import SkinDetachError
 from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
@@ -31,7 +32,7 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "bake_file_path", "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
+           "bake_file_path", "shutdown", "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
@@ -79,13 +80,14 @@ def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
     Move, rotate or animate the empty, then :func:`deform`.
 
     ``mirror`` ("X", "Y" or "Z", the mesh's local axis, as Blender's Mesh Symmetry; None: the
-    first axis whose mesh symmetry toggle ``mesh.use_mirror_x/y/z`` is on; "": none): also make
-    the mirrored twin from the vertices at the mirror images (refused, naming how many have
-    none, when the mesh is not symmetric enough); moving either one moves both, mirrored. A
-    selection that is its own mirror image makes one handle that keeps the rig symmetric. When
-    every handle and anchor of a rig is mirrored across the same axis, the result is made
-    exactly symmetric. Returns the handle made from ``vertex_ids``; its twin is in
-    :func:`handles_of`."""
+    axis whose mesh symmetry toggle ``mesh.use_mirror_x/y/z`` is on, refused when two or three
+    are; "": none): also make the mirrored twin from the vertices at the mirror images (refused,
+    naming how many have none, when the mesh is not symmetric enough); moving either one moves
+    both, mirrored. A selection that is its own mirror image makes one handle that keeps the rig
+    symmetric. When every handle and anchor of a rig has a twin across one axis or is its own
+    mirror image across it (toggles and flags aside), the result is made exactly symmetric, and
+    self-symmetric handles move only symmetrically. Returns the handle made from
+    ``vertex_ids``; its twin is in :func:`handles_of`."""
     return _add(obj, vertex_ids, handles.HANDLE, on_proxy, group, mirror)
 
 
@@ -103,7 +105,12 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     if mirror not in (None, "", *handles.AXES):
         raise SkinDetachError(f"mirror: expected None, 'X', 'Y' or 'Z', got {mirror!r}")
     if mirror is None and not on_proxy:  # the mesh's own symmetry setting (Edit Mode's X/Y/Z toggles)
-        mirror = next((axis for axis in handles.AXES if getattr(obj.data, f"use_mirror_{axis.lower()}", False)), None)
+        toggles = [axis for axis in handles.AXES if getattr(obj.data, f"use_mirror_{axis.lower()}", False)]
+        if len(toggles) > 1:
+            raise SkinDetachError(f"mesh {obj.data.name!r}: expected at most one of its X/Y/Z mirror toggles on to make "
+                                  f"mirror twins, got {' and '.join(toggles)} (a handle mirrors across one axis); turn "
+                                  f"all but one off, or pass mirror='{toggles[0]}' (or '' for none)")
+        mirror = toggles[0] if toggles else None
     if (vertex_ids is None) == (group is None):
         raise SkinDetachError("vertex_ids, group: expected exactly one of them, got "
                               f"{'both' if group is not None else 'neither'}")
@@ -302,6 +309,12 @@ def selected_vertices(context):
     (the mesh's Edit Mode selection, Edit Mode left first, or its proxy's): (obj, vertex ids (k,),
     on_proxy)."""
     return skin_rig.selection(context)
+
+
+def shutdown():
+    """Stop the core's worker threads (unregistering the add-on calls it; they start again when
+    next needed)."""
+    threads.shutdown()
 
 
 def frame_list(frames):

@@ -39,7 +39,9 @@ output, a frame whose file is missing after the bake, an unexpected error with i
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 
@@ -186,6 +188,10 @@ def main(argv=None):
     exits 1 with a one-line message on failure (any error: Blender itself would exit 0 after an
     uncaught one), 2 on bad arguments."""
     args = parse_args(script_argv() if argv is None else argv)
+    if threading.current_thread() is threading.main_thread():
+        # Ctrl-C stops the bake (Blender, and the bpy module, leave SIGINT to themselves): the bake
+        # gives the scene back as it was, the files written so far are complete.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         import bpy  # noqa: F401  (first: the bpy module makes mathutils importable)
 
@@ -202,3 +208,6 @@ def main(argv=None):
     except BakeFailed as exc:
         print(f"bake: error: {exc}", file=sys.stderr, flush=True)
         sys.exit(1)
+    except KeyboardInterrupt:
+        print("bake: interrupted (Ctrl-C); the files written so far are complete", file=sys.stderr, flush=True)
+        sys.exit(130)

@@ -196,3 +196,23 @@ def test_two_bakes_of_one_frame_into_one_folder_do_not_collide(rig_file, tmp_pat
     records = api.bake(obj, [2], into=api.FILES, path=pattern)
     assert inner == [records[0]["output"]] and (tmp_path / "c_0002.obj").stat().st_size > 0
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no partial file left
+
+
+def test_ctrl_c_stops_a_bake_with_complete_files_and_exit_130(rig_file, tmp_path):
+    import signal
+    import time
+    target = tmp_path / "i_####.obj"
+    process = subprocess.Popen([sys.executable, str(BAKE), "--blend", str(rig_file), "--frames", "1-2000",
+                                "--output", str(target)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not process.stdout.readline().startswith("Time:"):
+        pass                                                  # the bake is under way
+    process.send_signal(signal.SIGINT)
+    try:
+        _, err = process.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        pytest.fail("Ctrl-C did not stop the bake")
+    assert process.returncode == 130 and "interrupted" in err, err[-2000:]
+    written = sorted(tmp_path.glob("i_*.obj"))
+    assert 0 < len(written) < 2000 and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]

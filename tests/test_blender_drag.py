@@ -109,9 +109,13 @@ def test_live_update_follows_moves_and_frame_changes(scene):
 
 
 def test_unregister_leaves_nothing_behind(scene):
+    import threading
+    from skin_detach_addon.core import threads
     scene.skin_detach.live_update = True
+    threads.pool().submit(sum, [1, 2]).result()              # the core's worker threads are running
     skin_detach_addon.unregister()
     try:
+        assert not [t.name for t in threading.enumerate() if t.name.startswith("skin_detach")]
         handlers = bpy.app.handlers
         modules = [f.__module__ for f in handlers.depsgraph_update_post + handlers.frame_change_post +
                    handlers.save_pre + handlers.load_post]
@@ -235,3 +239,22 @@ def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
     assert follow_start([], ids, targets) is None
     small = [SimpleNamespace(vertices=older + 1e-4, converged=True), SimpleNamespace(vertices=older, converged=True)]
     assert np.allclose(follow_start(small, ids, older[ids] + 1.0), older + 2e-4)  # a small motion goes on whole
+
+
+def test_a_file_loaded_during_a_drag_ends_the_modal_cleanly(scene):
+    from types import SimpleNamespace
+    from skin_detach_addon.ui.operators import SKIN_DETACH_OT_drag
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    removed, reports, headers = [], [], []
+    context = SimpleNamespace(area=SimpleNamespace(header_text_set=headers.append),
+                              window_manager=SimpleNamespace(event_timer_remove=removed.append))
+    operator = SimpleNamespace(session=DragSession(obj, handle, TopView(0.01), (0, 0)), _timer="timer",
+                               report=lambda level, text: reports.append((level, text)))
+    operator._end_timer = lambda ctx: SKIN_DETACH_OT_drag._end_timer(operator, ctx)
+    event = SimpleNamespace(type="MOUSEMOVE", value="NOTHING", mouse_region_x=10, mouse_region_y=5)
+    assert SKIN_DETACH_OT_drag.modal(operator, context, event) == {'RUNNING_MODAL'}
+    bpy.ops.wm.read_homefile(use_empty=True)                 # the drag's objects are gone
+    event.mouse_region_x = 20
+    assert SKIN_DETACH_OT_drag.modal(operator, context, event) == {'CANCELLED'}
+    assert removed == ["timer"] and headers[-1] is None and reports[-1][0] == {'WARNING'}

@@ -269,3 +269,19 @@ def test_a_renamed_mesh_still_settles(scene):
     obj.name = "renamed"
     assert live_update.settle(now=time.monotonic() + 10 * live_update.IDLE_SECONDS) is None
     assert not obj.hide_viewport and np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.05
+
+
+def test_a_save_during_a_preview_drag_then_cancel_gives_the_mesh_back(scene, tmp_path):
+    from skin_detach_addon.blender.deformation import Deformation
+    obj, handle = _rigged(scene)
+    before = _state(obj)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "during.blend"))  # save_pre writes the shown pose
+    assert not np.array_equal(mesh_io.read_positions(obj.data), before[0])
+    session.event("MOUSEMOVE", "NOTHING", (140, 70))          # the drag goes on with the preview
+    assert session.event("ESC", "PRESS", (140, 70)) == CANCELLED
+    after = _state(obj)
+    assert np.array_equal(after[0], before[0]) and np.array_equal(after[1], before[1]) and after[3] == before[3]
+    Deformation(obj)                                          # not "edited since": every operator works
+    assert not obj.hide_viewport

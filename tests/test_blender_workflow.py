@@ -249,9 +249,11 @@ def test_typed_numbers_stay_in_budget_and_an_absurd_one_is_refused_as_a_keystrok
     assert np.isfinite(np.array(handle.matrix_world)).all() and np.isfinite(positions(obj)).all()
 
 
-def _mirror_error(points, axis=0):
+def _mirror_error(points, axis=0, rest=None):
+    """Largest distance of a vertex from its mirror twin's image (twins found on ``rest``, else on
+    ``points`` themselves)."""
     from skin_detach_addon.core.symmetry import mirror_map
-    mapping = mirror_map(points, axis)
+    mapping = mirror_map(points if rest is None else rest, axis)
     matched = np.flatnonzero(mapping >= 0)
     image = points[mapping[matched]].copy()
     image[:, axis] *= -1.0
@@ -276,7 +278,7 @@ def test_mesh_x_symmetry_makes_twins_and_keeps_a_rig_without_mirror_flags_symmet
     top.location.z += 0.1
     api.deform(obj)
     moved = positions(obj)
-    assert _mirror_error(moved) <= 1e-6 * size
+    assert _mirror_error(moved, rest=rest) <= 1e-6 * size
     motion = handles.local_motion(obj, top)                  # put back on a symmetric motion: no X move
     assert abs(motion[0, 3]) <= 1e-9 and np.allclose(motion[:3, :3], np.eye(3), atol=1e-9)
     assert abs(motion[2, 3] - 0.1) <= 1e-6
@@ -309,7 +311,7 @@ def test_s_on_a_self_symmetric_handle_keeps_the_scale_about_its_centre(scene, sc
     expected[:3, 3] = (1.0 - scale) * centre
     assert np.allclose(motion, expected, atol=1e-6 * size)    # not a translation of the cap to the origin
     moved = positions(obj)
-    assert _mirror_error(moved) <= 1e-6 * size
+    assert _mirror_error(moved, rest=rest) <= 1e-6 * size
     ids = handles.proxy_ids_of(top)
     proxy = api.proxy_of(obj)
     proxy_points = np.array([proxy.data.vertices[i].co for i in ids])
@@ -317,3 +319,90 @@ def test_s_on_a_self_symmetric_handle_keeps_the_scale_about_its_centre(scene, sc
     assert np.abs(proxy_points - targets).max() <= 1e-5 * size
     cap = np.flatnonzero(rest[:, 2] > 0.85)                   # the mesh follows the proxy: the cap is scaled
     assert np.abs(moved[cap] - (rest[cap] * scale + (1.0 - scale) * centre)).max() <= 0.05 * size
+
+
+def _raised_with(obj, grip, rest):
+    """Raise ``grip`` 0.3 and deform: (the mean rise of its mesh vertices, of its proxy vertices)."""
+    from skin_detach_addon.blender import binding, handles
+    grip.location.z += 0.3
+    api.deform(obj)
+    detail = handles.detail_ids_of(grip)
+    proxy = api.proxy_of(obj)
+    ids = handles.proxy_ids_of(grip)
+    proxy_rest = binding.open_binding(obj).surface.proxy_vertices[ids]
+    proxy_now = np.array([proxy.data.vertices[i].co for i in ids])
+    return float((positions(obj)[detail, 2] - rest[detail, 2]).mean()), float((proxy_now[:, 2] - proxy_rest[:, 2]).mean())
+
+
+@pytest.mark.parametrize("change", ["delete the twin", "copy the twin", "toggle off"])
+def test_mesh_and_proxy_agree_whatever_happens_to_the_twins(scene, change):
+    from skin_detach_addon.blender import handles
+    obj = monkey()
+    obj.data.use_mirror_x = True
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
+    grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0))
+    twin = handles.twin_of(grip)
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    if change == "delete the twin":
+        twin.select_set(True)
+        bpy.ops.object.delete()
+    elif change == "copy the twin":
+        twin.select_set(True)
+        bpy.context.view_layer.objects.active = twin
+        bpy.ops.object.duplicate()                            # the copy is nobody's twin
+    else:
+        obj.data.use_mirror_x = False                         # the twins stay twins
+    mesh_rise, proxy_rise = _raised_with(obj, grip, rest)
+    assert abs(proxy_rise - 0.3) <= 1e-3
+    assert abs(mesh_rise - proxy_rise) <= 0.02, (mesh_rise, proxy_rise)  # it was 0.158 against 0.300
+    if change == "toggle off":                               # still a symmetric rig: exactly symmetric
+        assert _mirror_error(positions(obj), rest=rest) <= 1e-6 * float(np.ptp(rest, axis=0).max())
+
+
+def test_two_mirror_toggles_are_refused_with_a_message_and_one_axis_given_is_taken(scene):
+    from skin_detach_addon.blender import handles
+    obj = monkey()
+    obj.data.use_mirror_x = obj.data.use_mirror_y = True
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    ear = np.flatnonzero(rest[:, 0] < -1.0)
+    with pytest.raises(SkinDetachError, match="X and Y"):
+        api.add_handle(obj, ear)
+    assert api.handles_of(obj) == []
+    grip = api.add_handle(obj, ear, mirror="X")
+    assert handles.twin_of(grip) is not None
+
+
+@pytest.mark.parametrize("toggle", [False, True])
+def test_a_constraint_that_is_its_own_mirror_image_keeps_the_rig_symmetric_toggle_or_not(scene, toggle):
+    obj = monkey()
+    obj.data.use_mirror_x = toggle
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    size = float(np.ptp(rest, axis=0).max())
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror="")       # its own mirror image, no flag
+    ear = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")  # and its twin
+    ear.location.z += 0.2
+    ear.rotation_euler.y = 0.3
+    api.deform(obj)
+    assert _mirror_error(positions(obj), rest=rest) <= 1e-6 * size                      # it was 1.7 % of the size
+
+
+def test_a_rig_symmetric_by_chance_stays_exact_while_it_moves_symmetrically_and_is_never_snapped(scene):
+    obj = monkey()                                            # no toggle, no mirror flags
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    size = float(np.ptp(rest, axis=0).max())
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror="")
+    top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75), mirror="")
+    top.location.z += 0.2                                     # a symmetric move: the result is exactly symmetric
+    api.deform(obj)
+    assert _mirror_error(positions(obj), rest=rest) <= 1e-6 * size
+    before = float(top.location.x)
+    top.location.x += 0.3                                     # sideways: nobody asked for symmetry, so it goes
+    api.deform(obj)
+    assert abs(top.location.x - (before + 0.3)) <= 1e-6     # not snapped back onto a symmetric motion
+    assert _mirror_error(positions(obj), rest=rest) > 1e-2 * size

@@ -305,10 +305,15 @@ class _FileWriter:
         # first Worker still runs) never write or rename each other's partial file.
         partial = os.path.join(folder, f".{name}.{_PROCESS_TAG}-{next(_WRITES)}.partial{os.path.splitext(name)[1]}")
         mesh_io.write_positions(self.obj.data, detail)
-        self._export(partial, target.lower().endswith(".obj"))
-        if not os.path.isfile(partial):
-            raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
-        os.replace(partial, target)
+        try:
+            self._export(partial, target.lower().endswith(".obj"))
+            if not os.path.isfile(partial):
+                raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
+            os.replace(partial, target)
+        except BaseException:  # an error or Ctrl-C: no partial file stays behind
+            if os.path.exists(partial):
+                os.remove(partial)
+            raise
         _remove_orphans(folder, name)
         return target
 

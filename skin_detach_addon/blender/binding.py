@@ -10,13 +10,15 @@ per binding id, so undo and reload find them again or rebuild them from the prop
 
 import json
 import uuid
+import zlib
 
 import numpy as np
 
 from ..core.dual_laplacian import DualLaplacian
 from ..core.errors import SkinDetachError
 from ..core.surface import Preview, SkinDetachedSurface
-from ..core.symmetry import mirror_map
+from ..core.geometry import bbox_diagonal
+from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
 from . import mesh_io
 
 KEY = "_skin_detach"
@@ -75,6 +77,11 @@ class Binding:
         #: Figures of the last step in this session (dict, see StepReport.figures), or None.
         self.last_step = None
         self._mirrors = {}
+        self._own_images = {}
+        #: A drag that shows the preview and never snapshots the mesh sets this to {} while it runs;
+        #: the first write of the mesh meanwhile (a save settling the preview) keeps the mesh's
+        #: snapshot under "mesh" first, for the drag's cancel to restore.
+        self.mesh_guard = None
 
     def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, max_iter=None, idle=False):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
@@ -103,6 +110,17 @@ class Binding:
         if axis not in self._mirrors:
             self._mirrors[axis] = mirror_map(self.rest, "XYZ".index(axis))
         return self._mirrors[axis]
+
+    def is_own_mirror_image(self, detail_ids, axis):
+        """Whether the rest positions of the mesh vertices ``detail_ids`` (k,) are their own mirror
+        image across local ``axis`` ("X", "Y", "Z"), within the mirror tolerance of the mesh's
+        diagonal (cached per vertex set)."""
+        ids = np.ascontiguousarray(detail_ids, dtype=np.int64)
+        key = (axis, ids.size, zlib.crc32(memoryview(ids).cast("B")))
+        if key not in self._own_images:
+            tolerance = MIRROR_TOLERANCE * bbox_diagonal(self.rest)
+            self._own_images[key] = ids.size > 0 and is_own_mirror_image(self.rest[ids], "XYZ".index(axis), tolerance)
+        return self._own_images[key]
 
     def forget_warm_starts(self):
         for entry in self._solvers.values():

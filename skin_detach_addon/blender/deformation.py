@@ -99,9 +99,12 @@ class Deformation:
         :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
-        axis = handles.symmetry_axis(self.obj, empties, self.binding.mirror_map)
-        #: Self-symmetric handles put back on a symmetric motion by this solve (names).
-        self.kept_symmetric = handles.keep_symmetric(self.obj, empties, axis) if axis else []
+        axis, asked = handles.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
+        #: Self-symmetric handles put back on a symmetric motion by this solve (names): only where
+        #: symmetry was asked for; a rig symmetric by chance counts as symmetric while it moves so.
+        self.kept_symmetric = handles.keep_symmetric(self.obj, empties, axis) if axis and asked else []
+        if axis and not asked and not handles.moves_symmetrically(self.obj, empties, axis):
+            axis = ""
         ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
@@ -203,8 +206,12 @@ class Deformation:
 
     def _write(self, detail, proxy_positions, mark=True):
         """Write the mesh and the proxy, or neither: every check comes first. The mesh is shown
-        again if a preview stood in for it."""
+        again if a preview stood in for it. A preview drag's guard gets the mesh's snapshot first
+        (see :attr:`Binding.mesh_guard`)."""
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
+        guard = self.binding.mesh_guard
+        if guard is not None and "mesh" not in guard:
+            guard["mesh"] = mesh_io.snapshot(self.obj.data)
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
         if mark:

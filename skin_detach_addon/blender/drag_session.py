@@ -78,8 +78,11 @@ class DragSession:
         n = self.deformation.binding.surface.n_detail
         self.previewing = (preview_above is not None and n > preview_above
                            and self.deformation.preview is not None)
-        # A previewing session writes the mesh only in its confirm, after which nothing is restored.
+        # A previewing session writes the mesh only in its confirm, after which nothing is restored;
+        # should anything else write it meanwhile (a save settles the preview), the guard keeps it.
         self._saved = self.deformation.snapshot(mesh=not self.previewing)
+        if self.previewing:
+            self.deformation.binding.mesh_guard = {}
         self.start = empty.matrix_world.copy()
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
@@ -234,11 +237,15 @@ class DragSession:
     def confirm(self):
         """Keep the result: a settled drag's shape as shown (in full detail), else the last
         move's shape certified to the settle tolerance (continued from it)."""
+        self.deformation.binding.mesh_guard = None
         if self.last is not None:
             self.last = self.deformation.commit() if self.settled else self.deformation.step(follow=True)
         return FINISHED
 
     def cancel(self):
         """Everything back bit for bit: empties, mesh (and shape keys), proxy, stored digest."""
+        guard, self.deformation.binding.mesh_guard = self.deformation.binding.mesh_guard, None
+        if self._saved.mesh is None and guard:  # written meanwhile by a save: put it back too
+            self._saved.mesh = guard["mesh"]
         self.deformation.restore(self._saved)
         return CANCELLED

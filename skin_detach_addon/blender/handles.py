@@ -228,30 +228,38 @@ def sync_twins(obj, empties):
         _mark_synced(follow)
 
 
-def symmetry_axis(obj, empties, mirror_map):
-    """The local axis ("X", "Y", "Z") a rig of ``obj`` is symmetric about, or "": every handle and
-    anchor of ``empties`` was made mirrored across (or symmetric about) the same axis, or, for
-    an axis whose mesh symmetry (Edit Mode's X/Y/Z mirror toggle) is on, each one has a twin
-    across it or holds a vertex set that is its own mirror image. ``mirror_map(axis)`` gives the
-    mesh's (n,) mirror map (:func:`~..core.symmetry.mirror_map`)."""
-    if not empties:
-        return ""
-    axes = {mirror_of(empty) for empty in empties}
-    if len(axes) == 1 and "" not in axes:
-        return axes.pop()
-    for axis in AXES:
-        if not getattr(obj.data, f"use_mirror_{axis.lower()}", False):
-            continue
-        mapping = mirror_map(axis)
-        if all(mirror_of(e) == axis and twin_of(e) is not None or self_symmetric(e, mapping) for e in empties):
-            return axis
-    return ""
+def symmetry_axis(obj, empties, own_mirror_image):
+    """(axis, asked): the local axis ("X", "Y", "Z") a rig of ``obj`` is symmetric about, or "",
+    and whether symmetry was asked for across it. Symmetric: each handle and anchor of
+    ``empties`` has a mirror twin across the axis or holds mesh vertices that are their own
+    mirror image (``own_mirror_image(detail_ids (k,), axis) -> bool``), whatever the mesh's
+    toggles and the handles' mirror flags say; asked: the mesh's mirror toggle for the axis is
+    on or a handle carries its mirror flag. A lone flagged handle (its twin deleted) or a Shift+D
+    copy of a twin (nobody's twin) makes the rig asymmetric, so the detail is never averaged with
+    a side the proxy does not mirror."""
+    for axis in AXES if empties else ():
+        if all(mirror_of(e) == axis and twin_of(e) is not None or self_symmetric(e, axis, own_mirror_image)
+               for e in empties):
+            asked = getattr(obj.data, f"use_mirror_{axis.lower()}", False) or any(mirror_of(e) == axis for e in empties)
+            return axis, bool(asked)
+    return "", False
 
 
-def self_symmetric(empty, mapping):
-    """The handle's detail vertices are their own mirror image under ``mapping`` (n,)."""
-    ids = detail_ids_of(empty, mapping.size)
-    return ids.size > 0 and bool((mapping[ids] >= 0).all()) and np.array_equal(np.unique(mapping[ids]), np.unique(ids))
+def moves_symmetrically(obj, empties, axis):
+    """Every handle of ``empties`` without a twin moves by a motion that commutes with the mirror
+    across ``axis`` (twins are mirrored by :func:`sync_twins`)."""
+    for empty in empties:
+        if kind_of(empty) == HANDLE and twin_of(empty) is None:
+            motion = local_motion(obj, empty)
+            if np.abs(symmetric_motion(motion, axis) - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()):
+                return False
+    return True
+
+
+def self_symmetric(empty, axis, own_mirror_image):
+    """The handle was made from mesh vertices that are their own mirror image across ``axis``."""
+    ids = detail_ids_of(empty)
+    return ids.size > 0 and own_mirror_image(ids, axis)
 
 
 def symmetric_motion(motion, axis):

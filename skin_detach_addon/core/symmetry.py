@@ -33,6 +33,19 @@ def mirror_map(points, axis, tolerance=MIRROR_TOLERANCE):
     return out
 
 
+def is_own_mirror_image(points, axis, tolerance):
+    """Whether the point set ``points`` (k, 3) is its own mirror image across the plane through
+    the origin normal to ``axis`` (0, 1 or 2): the image of every point lies within ``tolerance``
+    (a distance) of a point of the set, and the images pair the points one to one."""
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape[0] == 0:
+        return False
+    mirrored = points.copy()
+    mirrored[:, axis] *= -1.0
+    distance, nearest = cKDTree(points).query(mirrored, distance_upper_bound=tolerance)
+    return bool(np.isfinite(distance).all()) and np.unique(nearest).size == points.shape[0]
+
+
 def mirrored_ids(mapping, ids, axis_name="X"):
     """Mirror images (k,) of the vertex ids (k,) under ``mapping`` (:func:`mirror_map`); raises
     naming how many have none."""

@@ -17,6 +17,14 @@ def pool():
     return _POOL
 
 
+def shutdown():
+    """Stop the pool's threads (after the work given to them); the next :func:`pool` makes a new one."""
+    global _POOL
+    if _POOL is not None:
+        _POOL.shutdown(wait=True)
+        _POOL = None
+
+
 def map_blocks(function, blocks):
     """``[function(block) for block in blocks]``, run on the pool when there is more than one."""
     if len(blocks) <= 1 or WORKERS == 1:

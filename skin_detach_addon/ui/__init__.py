@@ -4,6 +4,7 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 
 import bpy
 
+from .. import api
 from . import live_update, menus, operators, panel, properties
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
@@ -23,3 +24,4 @@ def unregister():
     properties.unregister()
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
+    api.shutdown()  # no worker thread outlives the add-on

@@ -247,6 +247,12 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             self.session.cancel()
             self.report({'ERROR'}, str(exc))
             state = api.CANCELLED
+        except ReferenceError:  # its objects are gone (a file was loaded): nothing left to restore
+            self._end_timer(context)
+            if context.area is not None:
+                context.area.header_text_set(None)
+            self.report({'WARNING'}, "Skin Detach: the drag ended, its objects were removed (a file was loaded?)")
+            return {'CANCELLED'}
         except BaseException:
             self._end_timer(context)
             raise
