@@ -23,6 +23,15 @@ def monkey():
     return obj
 
 
+def bound_monkey(mirror_x=False):
+    """Suzanne bound to a 300-face proxy, its mesh X toggle as given: (obj, rest (n, 3), size)."""
+    obj = monkey()
+    obj.data.use_mirror_x = mirror_x
+    api.build(obj, target_faces=300)
+    rest = api.rest_positions(obj).astype(np.float64)
+    return obj, rest, float(np.ptp(rest, axis=0).max())
+
+
 def positions(obj):
     out = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
     obj.data.vertices.foreach_get("co", out)
@@ -293,11 +302,7 @@ def test_mesh_x_symmetry_makes_twins_and_keeps_a_rig_without_mirror_flags_symmet
 @pytest.mark.parametrize("scale", [0.5, 2.0, -1.0])
 def test_s_on_a_self_symmetric_handle_keeps_the_scale_about_its_centre(scene, scale):
     from skin_detach_addon.blender import binding, handles
-    obj = monkey()
-    obj.data.use_mirror_x = True
-    api.build(obj, target_faces=300)
-    rest = api.rest_positions(obj).astype(np.float64)
-    size = float(np.ptp(rest, axis=0).max())
+    obj, rest, size = bound_monkey(mirror_x=True)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
     top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75))  # its own mirror image
     assert handles.twin_of(top) is None
@@ -337,10 +342,7 @@ def _raised_with(obj, grip, rest):
 @pytest.mark.parametrize("change", ["delete the twin", "copy the twin", "toggle off"])
 def test_mesh_and_proxy_agree_whatever_happens_to_the_twins(scene, change):
     from skin_detach_addon.blender import handles
-    obj = monkey()
-    obj.data.use_mirror_x = True
-    api.build(obj, target_faces=300)
-    rest = api.rest_positions(obj).astype(np.float64)
+    obj, rest, _ = bound_monkey(mirror_x=True)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
     grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0))
     twin = handles.twin_of(grip)
@@ -378,11 +380,7 @@ def test_two_mirror_toggles_are_refused_with_a_message_and_one_axis_given_is_tak
 
 @pytest.mark.parametrize("toggle", [False, True])
 def test_a_constraint_that_is_its_own_mirror_image_keeps_the_rig_symmetric_toggle_or_not(scene, toggle):
-    obj = monkey()
-    obj.data.use_mirror_x = toggle
-    api.build(obj, target_faces=300)
-    rest = api.rest_positions(obj).astype(np.float64)
-    size = float(np.ptp(rest, axis=0).max())
+    obj, rest, size = bound_monkey(mirror_x=toggle)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror="")       # its own mirror image, no flag
     ear = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")  # and its twin
     ear.location.z += 0.2
@@ -392,10 +390,7 @@ def test_a_constraint_that_is_its_own_mirror_image_keeps_the_rig_symmetric_toggl
 
 
 def test_a_rig_symmetric_by_chance_stays_exact_while_it_moves_symmetrically_and_is_never_snapped(scene):
-    obj = monkey()                                            # no toggle, no mirror flags
-    api.build(obj, target_faces=300)
-    rest = api.rest_positions(obj).astype(np.float64)
-    size = float(np.ptp(rest, axis=0).max())
+    obj, rest, size = bound_monkey()                          # no toggle, no mirror flags
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror="")
     top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75), mirror="")
     top.location.z += 0.2                                     # a symmetric move: the result is exactly symmetric
