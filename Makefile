@@ -34,8 +34,11 @@ test313:
 		$(VENV313)/bin/python -m pytest -q tests; \
 	fi
 
+# Measure the drag and the quality again and rewrite docs/benchmarks.md from their JSON.
 bench: $(VENV)/.installed
-	$(PY) scripts/benchmark.py --json out/benchmark.json
+	$(PY) scripts/benchmark_drag.py --json bench/results/drag.json
+	$(PY) scripts/benchmark_quality.py --poses 100 --json bench/results/quality.json
+	$(PY) scripts/benchmark_page.py
 
 extension: $(VENV)/.installed
 	$(PY) scripts/build_extension.py

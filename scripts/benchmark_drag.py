@@ -25,7 +25,6 @@ then confirms. Figures:
 """
 
 import argparse
-import json
 import math
 import pathlib
 import sys
@@ -38,7 +37,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 import bpy  # noqa: E402  (first: the bpy module makes mathutils importable)
 from mathutils import Matrix  # noqa: E402
 
-from bench import blender_stack  # noqa: E402
+from bench import blender_stack, report  # noqa: E402
 from bench.meshes import blender_mesh, bundled, subdivide, subdivided  # noqa: E402
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
@@ -207,8 +206,7 @@ def main():
                   f"{rest_text} | {ours['release_pop']:.1e} | "
                   f"{ours['confirm_ms']:.0f} | {stack_text} | {ratio} |", flush=True)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as handle:
-            json.dump(rows, handle, indent=2)
+        report.save(args.json, rows)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ and Surface Deform binds) and full-resolution ARAP (libigl, 10 iterations, dev-o
 """
 
 import argparse
-import json
 import pathlib
 import sys
 import time
@@ -23,6 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
 
+from bench import report
 from bench.arap import arap_reference
 from bench.meshes import bundled
 from bench.poses import pose_suite
@@ -117,8 +117,7 @@ def main():
                   f"{row['dihedral_change_deg']:.2f} | {row['creases']} | {row['handle_error_pct_diag']:.2e} | "
                   f"{row['volume_change_pct']:+.2f} | {settle} |", flush=True)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as handle:
-            json.dump(figures, handle, indent=2)
+        report.save(args.json, figures)
 
 
 if __name__ == "__main__":

@@ -56,7 +56,8 @@ FARM_EXPR = ("import importlib, sys, bpy; "
              "importlib.import_module(found[0] + '.bake_cli').main()")
 
 
-def parse_args(argv):
+def parser():
+    """The command line's :class:`argparse.ArgumentParser` (options as in the module docstring)."""
     parser = argparse.ArgumentParser(prog="skin-detach-bake", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--blend", help="the .blend to open (bpy-module use; Blender opens it itself)")
@@ -73,7 +74,11 @@ def parse_args(argv):
     parser.add_argument("--rebuild", action="store_true")
     parser.add_argument("--farm", action="store_true", help="one chunk of a farm job: one file per frame only")
     parser.add_argument("--verify", action="store_true", help="check that every frame's file exists; solve nothing")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def parse_args(argv):
+    args = parser().parse_args(argv)
     args.apply_modifiers = args.apply_modifiers or args.modifiers == "apply"
     args.no_volume = args.no_volume or args.volume == "free"
     return args

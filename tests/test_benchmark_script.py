@@ -57,7 +57,9 @@ def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_
                           "--faces", "500", "--json", str(tmp_path / "q.json")],
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
-    figures = json.loads((tmp_path / "q.json").read_text())
+    saved = json.loads((tmp_path / "q.json").read_text())
+    figures = saved["rows"]
+    assert saved["meta"]["command"].startswith("python ") and "numpy" in saved["meta"]["versions"]
     assert [(r["mesh"], r["method"]) for r in figures["poses"]] == [("spot", "rotated"), ("spot", "paper")]
     rotated = figures["poses"][0]
     assert rotated["warm_converged"] == rotated["cold_converged"] == 3
