@@ -380,3 +380,19 @@ def test_a_thin_ribbon_rebuilds_its_rest_exactly(cells):
     points, tris = ribbon(cells)
     sds = SkinDetachedSurface.build(points, tris, target_faces=300)
     assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
+
+
+def test_a_proxy_face_collapsed_to_a_point_carries_no_vertex():
+    from skin_detach_addon.core.skin import bind_skin, check_coefficients
+    rng = np.random.default_rng(7)
+    # A square proxy (two faces) plus a third face whose corners are 1e-14 apart, far from the rest.
+    proxy = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                      [2, 2, 0.5], [2 + 1e-14, 2, 0.5], [2, 2 + 1e-14, 0.5]], dtype=np.float64)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]])
+    points = np.c_[rng.uniform(-0.2, 1.2, (200, 2)), rng.uniform(-0.3, 0.3, 200)]
+    points[:20] = [2.0, 2.0, 0.5] + rng.normal(scale=0.3, size=(20, 3))  # near the collapsed face
+    normals = np.tile([0.0, 0.0, 1.0], (200, 1))
+    carrier = np.where(np.arange(200) < 20, 4, 0)             # some carried by the collapsed face's corner
+    skin, _ = bind_skin(points, normals, carrier, proxy, faces)
+    check_coefficients(skin, "skin")                          # it refused the build with bary 1e13 before
+    assert 2 not in set(skin.face.tolist())
