@@ -60,12 +60,14 @@ def test_rest_round_trip_on_synthetic_meshes(make):
     assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
 
 
+@pytest.mark.parametrize("smooth", [False, True])
 @pytest.mark.parametrize("make", [lambda b: b("spot"), lambda b: plane(24)])
-def test_rigid_motion_and_uniform_scale_carry_over(bundled, make):
+def test_rigid_motion_and_uniform_scale_carry_over(bundled, make, smooth):
     points, tris = make(bundled)
     sds = SkinDetachedSurface.build(points, tris, target_faces=300)
+    assert np.abs(sds.reconstruct(sds.proxy_vertices, smooth=smooth) - points).max() <= 1e-9 * diagonal(points)
     rotation, shift, scale = random_rotation(3), np.array([0.3, -2.0, 5.0]), 2.5
-    moved = sds.reconstruct(scale * sds.proxy_vertices @ rotation.T + shift)
+    moved = sds.reconstruct(scale * sds.proxy_vertices @ rotation.T + shift, smooth=smooth)
     expected = scale * points @ rotation.T + shift
     assert np.abs(moved - expected).max() <= 1e-9 * diagonal(expected)
 
@@ -191,9 +193,11 @@ def test_messy_mesh_builds_and_round_trips():
     rest = sds.reconstruct(sds.proxy_vertices)
     assert np.isfinite(rest).all()
     assert np.abs(rest - points).max() <= 1e-9 * diagonal(points)
-    moved = sds.reconstruct(sds.proxy_vertices * 1.5 + 1.0)
-    assert np.array_equal(moved[victim], moved[n])
-    assert np.allclose(moved[unused], points[unused] * 1.5 + 1.0, atol=1e-9)
+    for smooth in (False, True):
+        moved = sds.reconstruct(sds.proxy_vertices * 1.5 + 1.0, smooth=smooth)
+        assert np.array_equal(moved[victim], moved[n])        # welded duplicates move together
+        assert np.allclose(moved[unused], points[unused] * 1.5 + 1.0, atol=1e-9)
+    assert np.abs(sds.reconstruct(sds.proxy_vertices, smooth=True) - points).max() <= 1e-9 * diagonal(points)
 
 
 def test_edits_reach_only_the_carried_part():
@@ -332,19 +336,25 @@ def test_rebuild_frames_follow_the_proxy_without_seams(bundled):
     assert dihedral_change(points, seam_free, tris) <= 0.95 * dihedral_change(points, per_face[sds.weld], tris)
 
 
-def test_detail_carried_by_one_rigid_group_moves_exactly_with_it(bundled):
+def bent_surface(points, tris, faces):
+    """(surface, scenario, bent proxy (m, 3), groups (m,)): the bend scenario solved on ``faces``."""
     from bench.scenario import bend_scenario
     from skin_detach_addon.core import DualLaplacian
-    points, tris = bundled("spot")
-    sds = SkinDetachedSurface.build(points, tris, target_faces=400)
+    sds = SkinDetachedSurface.build(points, tris, target_faces=faces)
     scenario = bend_scenario(points)
     ids, targets = scenario.proxy_constraints(sds)
     bent = DualLaplacian(sds.proxy_vertices, sds.proxy_faces, ids).solve(targets, max_iter=300).vertices
-    groups = scenario.proxy_groups(sds)
-    detail = sds.reconstruct(bent, groups=groups)
+    return sds, scenario, bent, scenario.proxy_groups(sds)
+
+
+def test_detail_carried_by_one_rigid_group_moves_exactly_with_it(bundled):
+    points, tris = bundled("spot")
+    sds, scenario, bent, groups = bent_surface(points, tris, 400)
     expected = scenario.move(points[scenario.handle_ids])
-    assert np.abs(detail[scenario.handle_ids] - expected).max() <= 1e-9 * diagonal(points)
-    assert np.abs(detail[scenario.anchor_ids] - points[scenario.anchor_ids]).max() <= 1e-9 * diagonal(points)
+    for smooth in (False, True):
+        detail = sds.reconstruct(bent, groups=groups, smooth=smooth)
+        assert np.abs(detail[scenario.handle_ids] - expected).max() <= 1e-9 * diagonal(points)
+        assert np.abs(detail[scenario.anchor_ids] - points[scenario.anchor_ids]).max() <= 1e-9 * diagonal(points)
     with pytest.raises(SkinDetachError, match="groups"):
         sds.reconstruct(bent, groups=groups[:-1])
 
@@ -396,3 +406,20 @@ def test_a_proxy_face_collapsed_to_a_point_carries_no_vertex():
     skin, _ = bind_skin(points, normals, carrier, proxy, faces)
     check_coefficients(skin, "skin")                          # it refused the build with bary 1e13 before
     assert 2 not in set(skin.face.tolist())
+
+
+def test_the_smoothed_rebuild_removes_creases_at_proxy_seams(bundled, tmp_path):
+    from bench.quality import creases, dihedral_change
+    from skin_detach_addon.core.seam_smoothing import SEAM_STEPS
+    points, tris = bundled("homer")
+    sds, _, bent, groups = bent_surface(points, tris, 300)
+    plain, smooth = (sds.reconstruct(bent, groups=groups, smooth=s) for s in (False, True))
+    assert creases(points, smooth, tris) < 0.5 * creases(points, plain, tris)
+    assert dihedral_change(points, smooth, tris) < dihedral_change(points, plain, tris)
+    assert SEAM_STEPS >= 1
+    sds.save(tmp_path / "skin.npz")                            # the triangles travel with the file
+    again = SkinDetachedSurface.load(tmp_path / "skin.npz")
+    assert np.abs(again.reconstruct(bent, groups=groups, smooth=True) - smooth).max() <= 1e-9 * diagonal(points)
+    bare = SkinDetachedSurface.from_arrays(sds.to_arrays())   # no triangles: refused, naming them
+    with pytest.raises(SkinDetachError, match="triangles"):
+        bare.reconstruct(bent, smooth=True)

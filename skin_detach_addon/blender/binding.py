@@ -126,11 +126,14 @@ class Binding:
         for entry in self._solvers.values():
             entry[1] = []
 
-    def rebuild(self, proxy_vertices, groups=None):
+    def rebuild(self, proxy_vertices, groups=None, mesh=None):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``groups``: their
         rigid groups, see :meth:`SkinDetachedSurface.reconstruct`), in a reused buffer (copy it
-        to keep it past the next call)."""
-        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups)
+        to keep it past the next call). With the bound ``mesh``, smoothed across the skin's seams
+        (its triangles are read once, the first time)."""
+        if mesh is not None and self.surface.triangles is None:
+            self.surface.attach_topology(mesh_io.read_triangles(mesh))
+        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups, smooth=mesh is not None)
 
     def rebuild_preview(self, proxy_vertices, groups=None):
         """(c, 3) float32 preview positions from deformed proxy vertices (m, 3), in a reused buffer."""

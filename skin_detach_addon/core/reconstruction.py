@@ -163,6 +163,8 @@ class Rebuild:
         """(3k, 3) V': row 3f + c is face f's rest scaled normal under corner c's similarity
         (``groups``: see :class:`VertexSimilarities`)."""
         scales, rotations = self._similarities(points, groups)
+        #: The last rebuild's proxy vertex similarities (scales (m,), rotations (m, 3, 3)).
+        self.similarities = (scales, rotations)
         corner = self.triangles.ravel()
         normals = np.repeat(self._rest_normals, 3, axis=0)
         turned = np.einsum("nij,nj->ni", rotations[corner], normals)

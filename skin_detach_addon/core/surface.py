@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
@@ -18,6 +19,7 @@ from .geometry import face_cross, flat_ranges
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
+from .seam_smoothing import SeamSmoothing
 from .simplification import follow_nearest, simplify
 from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement, check_coefficients
 from .validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
@@ -101,6 +103,33 @@ class SkinDetachedSurface:
         self.stats = stats
         self._rebuild = Rebuild(rebuild_matrix(skin, proxy_faces, proxy_vertices.shape[0], weld), proxy_vertices,
                                proxy_faces)
+        #: The detail mesh's triangles (f, 3), once :meth:`attach_topology` gave them, and the
+        #: seam smoothing made from them on first use.
+        self.triangles = None
+        self._seams = None
+
+    def attach_topology(self, triangles):
+        """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), which
+        the smoothed rebuild (:meth:`reconstruct` with ``smooth``) averages over."""
+        self.triangles = as_triangles("triangles", triangles, self.n_detail)
+        self._seams = None
+
+    def _seam_smoothing(self):
+        if self.triangles is None:
+            raise SkinDetachError("smooth: expected the detail triangles (attach_topology), got none; pass them or "
+                                  "rebuild without smooth")
+        if self._seams is None:
+            u = self.skin.case.shape[0]
+            corners = self.proxy_faces[self.skin.face]
+            blend = sp.csr_matrix(((self.skin.bary * self.skin.weight[:, None]).ravel(),
+                                   (np.repeat(self.skin.vertex, 3), corners.ravel())),
+                                  shape=(u, self.proxy_vertices.shape[0]))
+            self._representatives = np.zeros(u, dtype=np.int64)
+            self._representatives[self.weld] = np.arange(self.n_detail)
+            rest = self._rebuild(self.proxy_vertices)[self._representatives]
+            self._rebuild.forget_warm_start()  # the next rebuild as it would have been without this one
+            self._seams = SeamSmoothing(self.weld[self.triangles], blend, rest)
+        return self._seams
 
     @property
     def n_detail(self):
@@ -214,6 +243,7 @@ class SkinDetachedSurface:
         }
         report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
+        surface.attach_topology(triangles)  # the caller's array (validated again, not kept twice)
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
@@ -223,11 +253,13 @@ class SkinDetachedSurface:
         report(1.0, "done")
         return surface
 
-    def reconstruct(self, proxy_vertices, out=None, groups=None):
+    def reconstruct(self, proxy_vertices, out=None, groups=None, smooth=False):
         """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
         given: an (n, 3) float64 or float32 array (float32 computes in float32). ``groups`` (m,)
         int, optional: label of the rigid group (handle or anchor) each proxy vertex was moved
-        with, -1 for none; detail carried by one group then moves exactly with it."""
+        with, -1 for none; detail carried by one group then moves exactly with it. ``smooth``:
+        also smooth the rebuild across the skin's seams (:mod:`.seam_smoothing`: no creases where
+        the proxy bends; needs :meth:`attach_topology`, about 3 passes over the detail more)."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
         if groups is not None:
             groups = np.asarray(groups)
@@ -239,7 +271,15 @@ class SkinDetachedSurface:
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        return self._rebuild(points, out=out, groups=groups)
+        if not smooth:
+            return self._rebuild(points, out=out, groups=groups)
+        seams = self._seam_smoothing()
+        rebuilt = self._rebuild(points, groups=groups)
+        result = seams(rebuilt[self._representatives], self._rebuild.similarities, groups)[self.weld]
+        if out is None:
+            return result
+        out[...] = result
+        return out
 
     def forget_warm_start(self):
         """The next :meth:`reconstruct` fits its frames cold: bit for bit the same result whatever
@@ -320,8 +360,10 @@ class SkinDetachedSurface:
         return cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin, str(arrays["fingerprint"]), stats)
 
     def save(self, path):
-        """Write an .npz file (no pickled objects) that :meth:`load` reads back."""
-        np.savez(path, **self.to_arrays())
+        """Write an .npz file (no pickled objects) that :meth:`load` reads back, with the detail
+        triangles when they were given."""
+        extra = {} if self.triangles is None else {"detail_triangles": self.triangles}
+        np.savez(path, **self.to_arrays(), **extra)
 
     @classmethod
     def load(cls, path):
@@ -331,4 +373,14 @@ class SkinDetachedSurface:
                 arrays = {key: data[key] for key in data.files}
         except (OSError, ValueError, EOFError) as exc:
             raise SkinDetachError(f"path: expected a skin-detach .npz file, could not read {path!s}: {exc}") from None
-        return cls.from_arrays(arrays, source=f"path {path!s}")
+        surface = cls.from_arrays(arrays, source=f"path {path!s}")
+        if "detail_triangles" in arrays:
+            try:
+                surface.attach_topology(np.asarray(arrays["detail_triangles"]).astype(np.int64).reshape(-1, 3))
+            except (TypeError, ValueError) as exc:
+                raise SkinDetachError(f"path {path!s}: expected detail_triangles (f, 3), got malformed data "
+                                      f"({exc}); rebuild the skin") from None
+            if topology_fingerprint(surface.n_detail, surface.triangles) != surface.fingerprint:
+                raise SkinDetachError(f"path {path!s}: expected detail_triangles matching the skin's topology, got "
+                                      f"others; rebuild the skin")
+        return surface
