@@ -83,14 +83,13 @@ class Binding:
         #: snapshot under "mesh" first, for the drag's cancel to restore.
         self.mesh_guard = None
 
-    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, max_iter=None, idle=False):
+    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
         One :class:`DualLaplacian` is factored per set of ids (the last few are kept). With
         ``follow`` the solve starts from :func:`follow_start` of the last two solutions of the
-        same set, as a drag does, and stops after ``budget_ms`` (None: no limit) or ``max_iter``
-        iterations (None: :data:`MAX_ITERATIONS`), ``idle``: see :meth:`DualLaplacian.solve`;
-        without it from rest, so the same handles give the same shape whatever was solved before
-        (Apply, bake)."""
+        same set, as a drag does, and stops after ``budget_ms`` (None: no limit; ``idle``: see
+        :meth:`DualLaplacian.solve`); without it from rest, so the same handles give the same
+        shape whatever was solved before (Apply, bake)."""
         key = (ids.tobytes(), bool(preserve_volume))
         if key not in self._solvers:
             if len(self._solvers) >= 8:
@@ -99,7 +98,7 @@ class Binding:
                                                 preserve_volume=preserve_volume), []]
         solver, recent = self._solvers[key]
         initial = follow_start(recent, ids, targets) if follow else None
-        result = solver.solve(targets, initial=initial, max_iter=max_iter or MAX_ITERATIONS, tol=tol,
+        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
                               budget_ms=budget_ms if follow else None, idle=idle and follow)
         self._solvers[key][1] = [result] + recent[:1]
         return result

@@ -33,7 +33,7 @@ SETTLE_SLICE_MS = 12.0
 
 def smoothed(tol, follow, result):
     """A converged solve from rest to the settle tolerance (Apply, bake) has its detail rebuilt
-    smooth across the skin's seams (no creases where the proxy bends, about four times the plain
+    smooth across the skin's seams (no creases where the proxy bends, 4-7 times the plain
     rebuild's cost); interactive updates that follow their path (a drag, its settle and confirm,
     Live Update) show and keep the plain rebuild, so what a drag showed is what it writes."""
     return not follow and tol <= SETTLE_TOL and result.converged
@@ -101,9 +101,9 @@ class Deformation:
         """The handle and anchor empties of the object, sorted by name."""
         return handles.handles_of(self.obj, self.proxy)
 
-    def _solve_proxy(self, tol, follow=False, budget_ms=None, max_iter=None, idle=False):
+    def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, rigid groups (m,)) from the
-        handles' transforms (``follow``, ``budget_ms``, ``max_iter``, ``idle``: see
+        handles' transforms (``follow``, ``budget_ms``, ``idle``: see
         :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
         handles.sync_twins(self.obj, empties)
@@ -117,7 +117,7 @@ class Deformation:
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, max_iter, idle)
+        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle)
         #: The last solve's (symmetry axis, result, groups): what :meth:`commit` rebuilds from.
         self.solved = (axis, result, groups)
         return axis, result, groups
@@ -129,22 +129,22 @@ class Deformation:
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return detail
 
-    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, max_iter=None, idle=False):
+    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, idle=False):
         """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
-        last solves, within ``budget_ms`` or ``max_iter``) and rebuild without writing anything.
+        last solves, within ``budget_ms``) and rebuild without writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        axis, result, groups = self._solve_proxy(tol, follow, budget_ms, max_iter, idle)
+        axis, result, groups = self._solve_proxy(tol, follow, budget_ms, idle)
         if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
             self.binding.surface.forget_warm_start()
         return result, self._rebuild(axis, result, groups, smoothed(tol, follow, result))
 
-    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, max_iter=None, idle=False):
+    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, idle=False):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
         binding (and, with ``mark``, the written digest: a drag marks only its last step, the
         confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
-        result, detail = self.solve(tol, follow, budget_ms, max_iter, idle)
+        result, detail = self.solve(tol, follow, budget_ms, idle)
         return self._report(start, result, detail, mark)
 
     def commit(self):
@@ -166,7 +166,7 @@ class Deformation:
         """The preview object a drag may show instead of the mesh, or None."""
         return stored.preview_of(self.obj) if self.binding.preview is not None else None
 
-    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS, max_iter=None, idle=False):
+    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS, idle=False):
         """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
         shows the preview in place of the mesh (see :meth:`show_preview`). Returns a
         :class:`StepReport` whose positions are the preview's (c, 3)."""
@@ -175,7 +175,7 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, groups = self._solve_proxy(tol, follow, budget_ms, max_iter, idle)
+        _, result, groups = self._solve_proxy(tol, follow, budget_ms, idle)
         positions = self.binding.rebuild_preview(result.vertices, groups)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)

@@ -61,8 +61,8 @@ class DragSession:
     only the confirm records the written positions (moves skip that per-move checksum).
 
     A move solves within :data:`DRAG_BUDGET_MS` and shows where it got. While the mouse rests,
-    TIMER events (the modal operator's window timer) go on with the same solve, a slice of the
-    same budget each, and show it, until it certifies to the settle tolerance: the header says
+    TIMER events (the modal operator's window timer) go on with the same solve, a slice of
+    :data:`SETTLE_SLICE_MS` each, and show it, until it certifies to the settle tolerance: the header says
     "settling", then "settled", and further TIMER events do nothing. The confirm of a settled
     drag writes the shape shown (rebuilt in full detail from the same proxy when the preview
     showed it); of an unsettled one, the solve continued to the settle tolerance first.
@@ -228,7 +228,7 @@ class DragSession:
 
     def settle_slice(self):
         """One slice of the settle while the mouse rests (a TIMER event): go on with the solve to
-        the settle tolerance within the move budget and show it; nothing once settled (or before
+        the settle tolerance within :data:`SETTLE_SLICE_MS` and show it; nothing once settled (or before
         the first move). Returns whether the shown shape is settled."""
         if self.last is not None and not self.settled:
             self._show(SETTLE_TOL, SETTLE_SLICE_MS, idle=True)

@@ -248,12 +248,20 @@ def symmetry_axis(obj, empties, own_mirror_image):
 def moves_symmetrically(obj, empties, axis):
     """Every handle of ``empties`` without a twin moves by a motion that commutes with the mirror
     across ``axis`` (twins are mirrored by :func:`sync_twins`)."""
-    for empty in empties:
-        if kind_of(empty) == HANDLE and twin_of(empty) is None:
-            motion = local_motion(obj, empty)
-            if np.abs(symmetric_motion(motion, axis) - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()):
-                return False
-    return True
+    return not any(_made_symmetric(obj, empty, axis) is not None for empty in _lone_handles(empties))
+
+
+def _lone_handles(empties):
+    """The handles of ``empties`` without a mirror twin (anchors and twins move symmetrically)."""
+    return [e for e in empties if kind_of(e) == HANDLE and twin_of(e) is None]
+
+
+def _made_symmetric(obj, empty, axis):
+    """(4, 4) the nearest motion to the handle's that commutes with the mirror across ``axis``, or
+    None when its own already does (within 1e-9 of its size)."""
+    motion = local_motion(obj, empty)
+    symmetric = symmetric_motion(motion, axis)
+    return symmetric if np.abs(symmetric - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()) else None
 
 
 def self_symmetric(empty, axis, own_mirror_image):
@@ -286,12 +294,9 @@ def keep_symmetric(obj, empties, axis):
     symmetric motion (a move across the plane cannot keep the mesh symmetric); returns the
     names of those it moved."""
     moved = []
-    for empty in empties:
-        if kind_of(empty) != HANDLE or twin_of(empty) is not None:
-            continue
-        motion = local_motion(obj, empty)
-        symmetric = symmetric_motion(motion, axis)
-        if np.abs(symmetric - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()):
+    for empty in _lone_handles(empties):
+        symmetric = _made_symmetric(obj, empty, axis)
+        if symmetric is not None:
             world = np.array(obj.matrix_world, dtype=np.float64) @ symmetric @ rest_local_of(empty)
             empty.matrix_world = Matrix(world.tolist())
             moved.append(empty.name)

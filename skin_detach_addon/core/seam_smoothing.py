@@ -28,7 +28,7 @@ up to 3e-4 of the diagonal at their rim; k = 5: 1,638) and the mean dihedral cha
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import unique_edges
+from .geometry import half_edge_graph
 
 #: One-ring averaging steps of the smooth part.
 SEAM_STEPS = 3
@@ -36,13 +36,9 @@ SEAM_STEPS = 3
 
 def one_ring_average(triangles, u):
     """(u, u) CSR: row i averages vertex i and its one-ring neighbours (equal weights)."""
-    edges = unique_edges(triangles)[0]
-    edges = edges[edges[:, 0] != edges[:, 1]]
-    rows = np.concatenate([np.arange(u), edges[:, 0], edges[:, 1]])
-    cols = np.concatenate([np.arange(u), edges[:, 1], edges[:, 0]])
-    matrix = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(u, u))
-    matrix.sum_duplicates()
-    matrix.data[:] = 1.0
+    graph = half_edge_graph(triangles, u)
+    matrix = sp.csr_matrix(graph + graph.T + sp.identity(u, dtype=np.int8, format="csr"), dtype=np.float64)
+    matrix.data[:] = 1.0  # an edge two faces share, or a vertex its own neighbour, counts once
     return sp.csr_matrix(sp.diags(1.0 / np.asarray(matrix.sum(axis=1)).ravel()) @ matrix)
 
 
