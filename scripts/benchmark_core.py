@@ -20,6 +20,8 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the repository root: bench, the add-on
 
 from bench.meshes import SIZES, armadillo, bundled
+from bench.scenario import bend_scenario
+from skin_detach_addon.core.seam_weights import SEAM_STEPS
 
 PAPER_PRECOMPUTE = "52 min (332K-vertex armadillo, 1,000 faces, 2008 PC)"
 
@@ -39,23 +41,33 @@ def measure(size, repeat, target):
     sds = SkinDetachedSurface.build(points, triangles, target_faces=target)
     build = time.perf_counter() - start
     after_build = peak_rss_mb()
-    out = np.empty_like(points)
-    proxy = sds.proxy_vertices.copy()
-    sds.reconstruct(proxy, out=out)
-    times = []
-    for k in range(repeat):
-        proxy[:, 2] += 1e-4
-        t = time.perf_counter()
-        sds.reconstruct(proxy, out=out)
-        times.append(time.perf_counter() - t)
+    rebuild = {}
+    for steps in (sds.seam_steps, 0):  # the diffused skin (every rebuild), then the skin as bound
+        sds.seam_steps = steps
+        for dtype in (np.float64, np.float32):
+            out = np.empty(points.shape, dtype=dtype)
+            proxy = sds.proxy_vertices.copy()
+            sds.reconstruct(proxy, out=out)
+            times = []
+            for k in range(repeat):
+                proxy[:, 2] += 1e-4
+                t = time.perf_counter()
+                sds.reconstruct(proxy, out=out)
+                times.append(time.perf_counter() - t)
+            rebuild[f"{steps}_{np.dtype(dtype).name}"] = 1000 * float(np.median(times))
+        rebuild[f"{steps}_nnz_per_vertex"] = sds._rebuild_for(None).nnz / points.shape[0]
+        if steps:
+            groups = bend_scenario(points).proxy_groups(sds)
+            t = time.perf_counter()
+            sds.reconstruct(sds.proxy_vertices, groups=groups)
+            rebuild["group_layout_s"] = time.perf_counter() - t
     start = time.perf_counter()
     fast_simplification.simplify(points, triangles.astype(np.int32), target_count=target)
     library = time.perf_counter() - start
     return {
         "size": size, "vertices": int(points.shape[0]), "faces": int(triangles.shape[0]),
         "proxy_faces": sds.stats["proxy_faces"], "build_s": build, "build_parts_s": sds.stats["seconds"],
-        "library_simplify_s": library, "rebuild_ms_median": 1000 * float(np.median(times)),
-        "rebuild_ms_min": 1000 * float(np.min(times)), "nnz_per_vertex": sds._rebuild.nnz / points.shape[0],
+        "library_simplify_s": library, "rebuild_ms_median": rebuild[f"{SEAM_STEPS}_float64"], "rebuild": rebuild,
         "build_peak_mb_over_input": after_build - before, "process_peak_mb": after_build,
     }
 
@@ -101,6 +113,16 @@ def main():
         print(f"| {r['size']} | {r['vertices']:,} | {r['build_s']:.2f} | {parts['simplify']:.2f} "
               f"({r['library_simplify_s']:.2f}) | {parts['normal_test']:.2f} | {parts['skin']:.2f} "
               f"| {r['rebuild_ms_median']:.1f} | {r['build_peak_mb_over_input']:.0f} | {PAPER_PRECOMPUTE} |")
+    print(f"\n## Rebuild, ms (median of {args.repeat}): the skin diffused over the detail ({SEAM_STEPS} steps, every "
+          f"rebuild) against the skin as bound (seam_steps 0)\n")
+    print("| size | diffused float64 / float32 | as bound float64 / float32 | ratio (float32) | entries per vertex "
+          "diffused / as bound | first rebuild with a handle layout s |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        b = r["rebuild"]
+        print(f"| {r['size']} | {b[f'{SEAM_STEPS}_float64']:.1f} / {b[f'{SEAM_STEPS}_float32']:.1f} | "
+              f"{b['0_float64']:.1f} / {b['0_float32']:.1f} | {b[f'{SEAM_STEPS}_float32'] / b['0_float32']:.2f} | "
+              f"{b[f'{SEAM_STEPS}_nnz_per_vertex']:.2f} / {b['0_nnz_per_vertex']:.2f} | {b['group_layout_s']:.2f} |")
     print("\n## 1-ring normal test, armadillo.obj (50K vertices)\n")
     print("| normal test | proxy faces | vertices disagreeing with a face around their proxy vertex "
           "| with a bound face | refused collapses | case 1 / 2 / 3 |")

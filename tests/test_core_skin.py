@@ -60,14 +60,15 @@ def test_rest_round_trip_on_synthetic_meshes(make):
     assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
 
 
-@pytest.mark.parametrize("smooth", [False, True])
+@pytest.mark.parametrize("steps", [0, 8])
 @pytest.mark.parametrize("make", [lambda b: b("spot"), lambda b: plane(24)])
-def test_rigid_motion_and_uniform_scale_carry_over(bundled, make, smooth):
+def test_rigid_motion_and_uniform_scale_carry_over(bundled, make, steps):
     points, tris = make(bundled)
     sds = SkinDetachedSurface.build(points, tris, target_faces=300)
-    assert np.abs(sds.reconstruct(sds.proxy_vertices, smooth=smooth) - points).max() <= 1e-9 * diagonal(points)
+    sds.seam_steps = steps
+    assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
     rotation, shift, scale = random_rotation(3), np.array([0.3, -2.0, 5.0]), 2.5
-    moved = sds.reconstruct(scale * sds.proxy_vertices @ rotation.T + shift, smooth=smooth)
+    moved = sds.reconstruct(scale * sds.proxy_vertices @ rotation.T + shift)
     expected = scale * points @ rotation.T + shift
     assert np.abs(moved - expected).max() <= 1e-9 * diagonal(expected)
 
@@ -193,11 +194,17 @@ def test_messy_mesh_builds_and_round_trips():
     rest = sds.reconstruct(sds.proxy_vertices)
     assert np.isfinite(rest).all()
     assert np.abs(rest - points).max() <= 1e-9 * diagonal(points)
-    for smooth in (False, True):
-        moved = sds.reconstruct(sds.proxy_vertices * 1.5 + 1.0, smooth=smooth)
+    for steps in (0, 8):
+        sds.seam_steps = steps
+        moved = sds.reconstruct(sds.proxy_vertices * 1.5 + 1.0)
         assert np.array_equal(moved[victim], moved[n])        # welded duplicates move together
         assert np.allclose(moved[unused], points[unused] * 1.5 + 1.0, atol=1e-9)
-    assert np.abs(sds.reconstruct(sds.proxy_vertices, smooth=True) - points).max() <= 1e-9 * diagonal(points)
+        assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
+
+
+def one_ring_matrix(tris, n):
+    from skin_detach_addon.core.seam_weights import one_ring_average
+    return one_ring_average(tris, n)
 
 
 def test_edits_reach_only_the_carried_part():
@@ -211,13 +218,17 @@ def test_edits_reach_only_the_carried_part():
     moved[carriers] += [0.0, 0.0, 1.0]
     motion = sds.reconstruct(moved)[:, 2] - points[:, 2]
     assert (motion[corner] > 0.0).all()
-    # Faces reach one proxy ring further than the carriers (their corners' frames turn with
-    # the carriers' neighbours), and no further.
-    ring = np.unique(sds.proxy_faces[np.isin(sds.proxy_faces, carriers).any(axis=1)])
-    near = np.isin(sds.proxy_faces, ring).any(axis=1)
-    touched = np.zeros(points.shape[0], dtype=bool)
+    # A face's candidate moves with its own corners only; the weights reach the faces of the
+    # detail within SEAM_STEPS rings (the diffused skin), and no further.
+    from skin_detach_addon.core.seam_weights import SEAM_STEPS
+    near = np.isin(sds.proxy_faces, carriers).any(axis=1)
+    touched = np.zeros(sds.skin.case.shape[0], dtype=bool)
     touched[sds.skin.vertex[near[sds.skin.face]]] = True
-    assert np.abs(motion[~touched[sds.weld]]).max() <= 1e-12
+    average = (one_ring_matrix(tris, points.shape[0]) > 0).astype(np.float64)
+    for _ in range(SEAM_STEPS):
+        touched = (average @ touched.astype(np.float64)) > 0
+    touched = touched[sds.weld]
+    assert np.abs(motion[~touched]).max() <= 1e-12
     assert (~touched).sum() >= points.shape[0] // 3
 
 
@@ -315,9 +326,9 @@ def test_float32_rebuild_matches_float64_and_bad_out_is_refused(bundled):
         sds.reconstruct(moved, out=np.empty((3, 3)))
 
 
-def test_rebuild_frames_follow_the_proxy_without_seams(bundled):
-    """Offsets turned by the corners' blended one-ring rotations bend the detail less than one
-    face normal per association (the paper's rebuild, computed here from the same skin)."""
+def test_the_diffused_skin_bends_the_detail_less_than_the_skin_as_bound(bundled):
+    """The rebuild with the skin's weights diffused over the detail mesh bends the detail less
+    than the paper's rebuild with the skin as bound (computed here from the skin itself)."""
     from bench.quality import dihedral_change
     from bench.scenario import bend_scenario
     from skin_detach_addon.core import DualLaplacian
@@ -351,8 +362,9 @@ def test_detail_carried_by_one_rigid_group_moves_exactly_with_it(bundled):
     points, tris = bundled("spot")
     sds, scenario, bent, groups = bent_surface(points, tris, 400)
     expected = scenario.move(points[scenario.handle_ids])
-    for smooth in (False, True):
-        detail = sds.reconstruct(bent, groups=groups, smooth=smooth)
+    for steps in (0, 8):
+        sds.seam_steps = steps
+        detail = sds.reconstruct(bent, groups=groups)
         assert np.abs(detail[scenario.handle_ids] - expected).max() <= 1e-9 * diagonal(points)
         assert np.abs(detail[scenario.anchor_ids] - points[scenario.anchor_ids]).max() <= 1e-9 * diagonal(points)
     with pytest.raises(SkinDetachError, match="groups"):
@@ -408,18 +420,46 @@ def test_a_proxy_face_collapsed_to_a_point_carries_no_vertex():
     assert 2 not in set(skin.face.tolist())
 
 
-def test_the_smoothed_rebuild_removes_creases_at_proxy_seams(bundled, tmp_path):
+def test_the_diffused_skin_removes_creases_at_proxy_seams(bundled, tmp_path):
     from bench.quality import creases, dihedral_change
-    from skin_detach_addon.core.seam_smoothing import SEAM_STEPS
     points, tris = bundled("homer")
     sds, _, bent, groups = bent_surface(points, tris, 300)
-    plain, smooth = (sds.reconstruct(bent, groups=groups, smooth=s) for s in (False, True))
-    assert creases(points, smooth, tris) < 0.5 * creases(points, plain, tris)
-    assert dihedral_change(points, smooth, tris) < dihedral_change(points, plain, tris)
-    assert SEAM_STEPS >= 1
+    diffused = sds.reconstruct(bent, groups=groups).copy()
+    sds.seam_steps = 0
+    plain = sds.reconstruct(bent, groups=groups)
+    assert creases(points, diffused, tris) < 0.5 * creases(points, plain, tris)
+    assert dihedral_change(points, diffused, tris) < dihedral_change(points, plain, tris)
+    sds.seam_steps = 8
     sds.save(tmp_path / "skin.npz")                            # the triangles travel with the file
     again = SkinDetachedSurface.load(tmp_path / "skin.npz")
-    assert np.abs(again.reconstruct(bent, groups=groups, smooth=True) - smooth).max() <= 1e-9 * diagonal(points)
+    assert np.abs(again.reconstruct(bent, groups=groups) - diffused).max() <= 1e-9 * diagonal(points)
     bare = SkinDetachedSurface.from_arrays(sds.to_arrays())   # no triangles: refused, naming them
     with pytest.raises(SkinDetachError, match="triangles"):
-        bare.reconstruct(bent, smooth=True)
+        bare.reconstruct(bent)
+    bare.attach_topology(tris)
+    assert np.abs(bare.reconstruct(bent, groups=groups) - diffused).max() <= 1e-9 * diagonal(points)
+    with pytest.raises(SkinDetachError, match="seam_steps"):
+        sds.seam_steps = -1
+
+
+def test_held_rows_re_diffused_locally_equal_the_diffusion_over_the_whole_mesh(bundled):
+    """SeamWeights.skin(keep) re-diffuses only near the held rows; the result is the diffusion
+    with those rows held over every vertex, and its weights are a partition of unity."""
+    import scipy.sparse as sp
+    from skin_detach_addon.core.seam_weights import SeamWeights
+    from skin_detach_addon.core.skin import ProxyFrames
+    points, tris = bundled("spot")
+    sds, _, bent, groups = bent_surface(points, tris, 300)
+    u = sds.skin.case.shape[0]
+    frames = ProxyFrames(sds.proxy_vertices, sds.proxy_faces)
+    seams = SeamWeights(sds.skin, sds.weld[tris], points[np.unique(sds.weld, return_index=True)[1]], frames, 4)
+    keep = seams.kept(groups)
+    assert 0 < keep.sum() < u
+    local = seams.skin(keep)
+    whole = seams._associations(np.arange(u), seams._diffused(np.arange(u), keep))
+    as_matrix = lambda v, f, w: sp.csr_matrix((w, (v, f)), shape=(u, frames.triangles.shape[0])).toarray()  # noqa: E731
+    assert np.abs(as_matrix(local.vertex, local.face, local.weight) - as_matrix(*whole[:3])).max() <= 1e-12
+    assert np.allclose(np.bincount(local.vertex, weights=local.weight, minlength=u), 1.0)
+    held = np.flatnonzero(keep)
+    own = as_matrix(sds.skin.vertex, sds.skin.face, sds.skin.weight)
+    assert np.abs(as_matrix(local.vertex, local.face, local.weight)[held] - own[held]).max() <= 1e-12

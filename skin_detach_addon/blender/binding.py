@@ -125,14 +125,11 @@ class Binding:
         for entry in self._solvers.values():
             entry[1] = []
 
-    def rebuild(self, proxy_vertices, groups=None, mesh=None):
+    def rebuild(self, proxy_vertices, groups=None):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``groups``: their
         rigid groups, see :meth:`SkinDetachedSurface.reconstruct`), in a reused buffer (copy it
-        to keep it past the next call). With the bound ``mesh``, smoothed across the skin's seams
-        (its triangles are read once, the first time)."""
-        if mesh is not None and self.surface.triangles is None:
-            self.surface.attach_topology(mesh_io.read_triangles(mesh))
-        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups, smooth=mesh is not None)
+        to keep it past the next call)."""
+        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups)
 
     def rebuild_preview(self, proxy_vertices, groups=None):
         """(c, 3) float32 preview positions from deformed proxy vertices (m, 3), in a reused buffer."""
@@ -245,6 +242,7 @@ def open_binding(obj):
         surface = SkinDetachedSurface.from_arrays(
             {key: value for key, value in arrays.items() if not key.startswith(PREVIEW_PREFIX)},
             source=f"binding of {obj.name!r}")
+        surface.attach_topology(mesh_io.read_triangles(obj.data))  # the topology was checked above
         preview = None
         if PREVIEW_PREFIX + "format_tag" in arrays:
             preview = Preview.from_arrays({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()

@@ -31,14 +31,6 @@ DRAG_BUDGET_MS = 4.0
 SETTLE_SLICE_MS = 12.0
 
 
-def smoothed(tol, follow, result):
-    """A converged solve from rest to the settle tolerance (Apply, bake) has its detail rebuilt
-    smooth across the skin's seams (no creases where the proxy bends, 4-7 times the plain
-    rebuild's cost); interactive updates that follow their path (a drag, its settle and confirm,
-    Live Update) show and keep the plain rebuild, so what a drag showed is what it writes."""
-    return not follow and tol <= SETTLE_TOL and result.converged
-
-
 def _hidden_by_user(obj):
     """The mesh object is hidden in viewports (its toggle, or H in the view layer)."""
     try:
@@ -122,9 +114,9 @@ class Deformation:
         self.solved = (axis, result, groups)
         return axis, result, groups
 
-    def _rebuild(self, axis, result, groups, smooth):
-        """The detail of a solve; ``smooth``: across the skin's seams (see :func:`smoothed`)."""
-        detail = self.binding.rebuild(result.vertices, groups, mesh=self.obj.data if smooth else None)
+    def _rebuild(self, axis, result, groups):
+        """The detail of a solve."""
+        detail = self.binding.rebuild(result.vertices, groups)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return detail
@@ -135,9 +127,7 @@ class Deformation:
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
         axis, result, groups = self._solve_proxy(tol, follow, budget_ms, idle)
-        if not follow:  # from rest: bit for bit the same whatever was solved and rebuilt before
-            self.binding.surface.forget_warm_start()
-        return result, self._rebuild(axis, result, groups, smoothed(tol, follow, result))
+        return result, self._rebuild(axis, result, groups)
 
     def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, idle=False):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
@@ -152,7 +142,7 @@ class Deformation:
         settled, is what is kept), the proxy, and the written digest; a :class:`StepReport`."""
         start = time.perf_counter()
         axis, result, groups = self.solved
-        return self._report(start, result, self._rebuild(axis, result, groups, False), True)
+        return self._report(start, result, self._rebuild(axis, result, groups), True)
 
     def _report(self, start, result, detail, mark):
         self._write(detail, result.vertices, mark)

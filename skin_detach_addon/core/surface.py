@@ -11,7 +11,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
@@ -19,9 +18,10 @@ from .geometry import face_cross, flat_ranges
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
-from .seam_smoothing import SeamSmoothing
+from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
-from .skin import CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, Skin, bind_skin, bound_disagreement, check_coefficients
+from .skin import (CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, ProxyFrames, Skin, bind_skin, bound_disagreement,
+                   check_coefficients)
 from .validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
 
 #: Version of the saved format; files of another version are refused.
@@ -56,6 +56,10 @@ class Preview:
     points: np.ndarray
     triangles: np.ndarray
     surface: "SkinDetachedSurface"
+
+    def __post_init__(self):
+        if self.surface.triangles is None:
+            self.surface.attach_topology(self.triangles)
 
     def to_arrays(self):
         """Dict of plain arrays that :meth:`from_arrays` reads back."""
@@ -101,35 +105,61 @@ class SkinDetachedSurface:
         self.skin = skin
         self.fingerprint = fingerprint
         self.stats = stats
-        self._rebuild = Rebuild(rebuild_matrix(skin, proxy_faces, proxy_vertices.shape[0], weld), proxy_vertices,
-                               proxy_faces)
-        #: The detail mesh's triangles (f, 3), once :meth:`attach_topology` gave them, and the
-        #: seam smoothing made from them on first use.
+        #: The detail mesh's triangles (f, 3), once :meth:`attach_topology` gave them (:meth:`build`
+        #: and :meth:`load` do), the diffused skin made from them on first use, and the rebuilds
+        #: of the last few rigid-group layouts.
         self.triangles = None
         self._seams = None
+        self._rebuilds = {}
+        self._seam_steps = SEAM_STEPS
+
+    @property
+    def seam_steps(self):
+        """How many one-ring steps the skin's weights are diffused over the detail mesh
+        (:mod:`.seam_weights`; 0: the skin as bound, which creases where the proxy bends)."""
+        return self._seam_steps
+
+    @seam_steps.setter
+    def seam_steps(self, steps):
+        if not isinstance(steps, (int, np.integer)) or isinstance(steps, bool) or steps < 0:
+            raise SkinDetachError(f"seam_steps: expected an integer >= 0, got {steps!r}")
+        self._seam_steps = int(steps)
+        self._seams = None
+        self._rebuilds = {}
 
     def attach_topology(self, triangles):
-        """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), which
-        the smoothed rebuild (:meth:`reconstruct` with ``smooth``) averages over."""
+        """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), over
+        which the rebuild diffuses the skin's weights (:meth:`build` and :meth:`load` attach them)."""
         self.triangles = as_triangles("triangles", triangles, self.n_detail)
         self._seams = None
+        self._rebuilds = {}
 
-    def _seam_smoothing(self):
+    def _seam_weights(self):
         if self.triangles is None:
-            raise SkinDetachError("smooth: expected the detail triangles (attach_topology), got none; pass them or "
-                                  "rebuild without smooth")
+            raise SkinDetachError("triangles: expected the detail triangles (attach_topology) before a rebuild, got "
+                                  "none; pass the mesh's triangles to attach_topology")
         if self._seams is None:
             u = self.skin.case.shape[0]
-            corners = self.proxy_faces[self.skin.face]
-            blend = sp.csr_matrix(((self.skin.bary * self.skin.weight[:, None]).ravel(),
-                                   (np.repeat(self.skin.vertex, 3), corners.ravel())),
-                                  shape=(u, self.proxy_vertices.shape[0]))
-            self._representatives = np.zeros(u, dtype=np.int64)
-            self._representatives[self.weld] = np.arange(self.n_detail)
-            rest = self._rebuild(self.proxy_vertices)[self._representatives]
-            self._rebuild.forget_warm_start()  # the next rebuild as it would have been without this one
-            self._seams = SeamSmoothing(self.weld[self.triangles], blend, rest)
+            frames = ProxyFrames(self.proxy_vertices, self.proxy_faces)
+            at_rest = rebuild_matrix(self.skin, self.proxy_faces, self.proxy_vertices.shape[0], np.arange(u))
+            rest = Rebuild(at_rest, self.proxy_vertices, self.proxy_faces)(self.proxy_vertices)
+            self._seams = SeamWeights(self.skin, self.weld[self.triangles], rest, frames, self._seam_steps)
         return self._seams
+
+    def _rebuild_for(self, groups):
+        """The :class:`.reconstruction.Rebuild` of the diffused skin with the vertices carried by
+        one rigid group held (``groups`` (m,) or None); the last two layouts are kept."""
+        seams = self._seam_weights()
+        keep = seams.kept(groups)
+        key = np.packbits(keep).tobytes()
+        if key not in self._rebuilds:
+            if len(self._rebuilds) >= 2:
+                self._rebuilds.pop(next(iter(self._rebuilds)))
+            skin = seams.skin(keep)
+            check_coefficients(skin, "the diffused skin")
+            self._rebuilds[key] = Rebuild(rebuild_matrix(skin, self.proxy_faces, self.proxy_vertices.shape[0],
+                                                         self.weld), self.proxy_vertices, self.proxy_faces)
+        return self._rebuilds[key]
 
     @property
     def n_detail(self):
@@ -244,6 +274,7 @@ class SkinDetachedSurface:
         report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
         surface.attach_topology(triangles)  # the caller's array (validated again, not kept twice)
+        surface._rebuild_for(None)  # the skin diffused over the detail mesh, once
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
@@ -253,13 +284,13 @@ class SkinDetachedSurface:
         report(1.0, "done")
         return surface
 
-    def reconstruct(self, proxy_vertices, out=None, groups=None, smooth=False):
+    def reconstruct(self, proxy_vertices, out=None, groups=None):
         """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
         given: an (n, 3) float64 or float32 array (float32 computes in float32). ``groups`` (m,)
         int, optional: label of the rigid group (handle or anchor) each proxy vertex was moved
-        with, -1 for none; detail carried by one group then moves exactly with it. ``smooth``:
-        also smooth the rebuild across the skin's seams (:mod:`.seam_smoothing`: no creases where
-        the proxy bends; needs :meth:`attach_topology`, about 3 passes over the detail more)."""
+        with, -1 for none; detail carried by one group then moves exactly with it. The skin's
+        weights are diffused over the detail mesh (:mod:`.seam_weights`: no creases where the
+        proxy bends); the first rebuild with a new layout of groups prepares its matrix."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
         if groups is not None:
             groups = np.asarray(groups)
@@ -271,20 +302,7 @@ class SkinDetachedSurface:
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        if not smooth:
-            return self._rebuild(points, out=out, groups=groups)
-        seams = self._seam_smoothing()
-        rebuilt = self._rebuild(points, groups=groups)
-        result = seams(rebuilt[self._representatives], self._rebuild.similarities, groups)[self.weld]
-        if out is None:
-            return result
-        out[...] = result
-        return out
-
-    def forget_warm_start(self):
-        """The next :meth:`reconstruct` fits its frames cold: bit for bit the same result whatever
-        was rebuilt before (a bake frame does not depend on its chunk)."""
-        self._rebuild.forget_warm_start()
+        return self._rebuild_for(groups)(points, out=out)
 
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
