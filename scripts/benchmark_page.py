@@ -89,9 +89,9 @@ def quality_section(data):
             table(poses, rows["poses"]) +
             "\n## Quality: the bend scenario per mesh\n\nAnchors on the lowest 10 % of the longest axis, the handle on "
             "the highest 10 % turned 45 degrees and shifted by a quarter of the longest extent; default 1,000-face "
-            "proxy, solved from rest; meshes flat-subdivided to at least 25,000 vertices. \"rotated\" is what Apply, "
-            "bake and a settled drag write (the rebuild smoothed across the skin's seams), \"plain rebuild\" what a "
-            "drag move shows. Creases: interior edges whose dihedral angle changes by more than 30 degrees; on proxy "
+            "proxy, solved from rest; meshes flat-subdivided to at least 25,000 vertices. \"rotated\" is what every "
+            "rebuild writes (a drag, Apply, bake: the skin's weights diffused over the detail mesh), \"skin as bound\" "
+            "the same solve rebuilt from the skin without the diffusion (seam_steps 0). Creases: interior edges whose dihedral angle changes by more than 30 degrees; on proxy "
             "seams: the share of them with an endpoint bound to more than one proxy face or the two to different "
             "faces. ARAP is libigl's on the full-resolution mesh (20 iterations).\n\n"
             "Same measurement as above.\n\n" + table(bend, rows["bend"]) +
