@@ -148,14 +148,15 @@ class SkinDetachedSurface:
 
     def _rebuild_for(self, groups):
         """The :class:`.reconstruction.Rebuild` of the diffused skin with the vertices carried by
-        one rigid group held (``groups`` (m,) or None); the last two layouts are kept."""
-        seams = self._seam_weights()
-        keep = seams.kept(groups)
-        key = np.packbits(keep).tobytes()
+        one rigid group held (``groups`` (m,) int64 or None); the last two layouts are kept, keyed
+        by the labels themselves (m values: a drag move looks its matrix up without a pass over
+        the detail)."""
+        key = None if groups is None else groups.tobytes()
         if key not in self._rebuilds:
             if len(self._rebuilds) >= 2:
                 self._rebuilds.pop(next(iter(self._rebuilds)))
-            skin = seams.skin(keep)
+            seams = self._seam_weights()
+            skin = seams.skin(seams.kept(groups))
             check_coefficients(skin, "the diffused skin")
             self._rebuilds[key] = Rebuild(rebuild_matrix(skin, self.proxy_faces, self.proxy_vertices.shape[0],
                                                          self.weld), self.proxy_vertices, self.proxy_faces)
