@@ -202,11 +202,6 @@ def test_messy_mesh_builds_and_round_trips():
         assert np.abs(sds.reconstruct(sds.proxy_vertices) - points).max() <= 1e-9 * diagonal(points)
 
 
-def one_ring_matrix(tris, n):
-    from skin_detach_addon.core.seam_weights import one_ring_average
-    return one_ring_average(tris, n)
-
-
 def test_edits_reach_only_the_carried_part():
     points, tris = plane(20)
     sds = SkinDetachedSurface.build(points, tris, target_faces=100)
@@ -220,11 +215,11 @@ def test_edits_reach_only_the_carried_part():
     assert (motion[corner] > 0.0).all()
     # A face's candidate moves with its own corners only; the weights reach the faces of the
     # detail within SEAM_STEPS rings (the diffused skin), and no further.
-    from skin_detach_addon.core.seam_weights import SEAM_STEPS
+    from skin_detach_addon.core.seam_weights import SEAM_STEPS, one_ring_average
     near = np.isin(sds.proxy_faces, carriers).any(axis=1)
     touched = np.zeros(sds.skin.case.shape[0], dtype=bool)
     touched[sds.skin.vertex[near[sds.skin.face]]] = True
-    average = (one_ring_matrix(tris, points.shape[0]) > 0).astype(np.float64)
+    average = (one_ring_average(tris, points.shape[0]) > 0).astype(np.float64)
     for _ in range(SEAM_STEPS):
         touched = (average @ touched.astype(np.float64)) > 0
     touched = touched[sds.weld]

@@ -64,7 +64,6 @@ class SeamWeights:
         self._frames = frames
         self._average = one_ring_average(np.asarray(triangles, dtype=np.int64), u)
         self._base = sp.csr_matrix((skin.weight, (skin.vertex, skin.face)), shape=(u, frames.triangles.shape[0]))
-        self._row_of = skin.vertex
         self._free = None
 
     def _within(self, seeds, rings):
@@ -117,8 +116,8 @@ class SeamWeights:
         labels = np.asarray(groups)[self._frames.triangles[self._skin.face]]
         low = np.full(u, np.iinfo(np.int64).max)
         high = np.full(u, np.iinfo(np.int64).min)
-        np.minimum.at(low, self._row_of, labels.min(axis=1))
-        np.maximum.at(high, self._row_of, labels.max(axis=1))
+        np.minimum.at(low, self._skin.vertex, labels.min(axis=1))
+        np.maximum.at(high, self._skin.vertex, labels.max(axis=1))
         return (low == high) & (low >= 0)
 
     def skin(self, keep=None):

@@ -17,7 +17,7 @@ from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
-from .reconstruction import Rebuild, rebuild_matrix
+from .reconstruction import Rebuild, rebuild_matrix, scaled_normals
 from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
 from .skin import (CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, ProxyFrames, Skin, bind_skin, bound_disagreement,
@@ -142,7 +142,7 @@ class SkinDetachedSurface:
             u = self.skin.case.shape[0]
             frames = ProxyFrames(self.proxy_vertices, self.proxy_faces)
             at_rest = rebuild_matrix(self.skin, self.proxy_faces, self.proxy_vertices.shape[0], np.arange(u))
-            rest = Rebuild(at_rest, self.proxy_vertices, self.proxy_faces)(self.proxy_vertices)
+            rest = at_rest @ np.vstack([self.proxy_vertices, scaled_normals(self.proxy_vertices, self.proxy_faces)])
             self._seams = SeamWeights(self.skin, self.weld[self.triangles], rest, frames, self._seam_steps)
         return self._seams
 
