@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 PYTHON313 ?= $(firstword $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13.*/bin/python3.13) $(shell command -v python3.13 2>/dev/null))
 VENV313 ?= .venv313
 
-.PHONY: demo test test313 bench extension clean
+.PHONY: demo test test313 test-gui docs-pictures bench extension clean
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -45,3 +45,15 @@ extension: $(VENV)/.installed
 
 clean:
 	rm -rf $(VENV) $(VENV313) out build dist .pytest_cache
+
+# The GUI tests in a real Blender window (Debian's blender 5.2.x in a cached chroot made with
+# debootstrap, or the Blender named by BLENDER=): installs the linux-x64 zip with
+# `blender --command extension install-file`, then drives the add-on with events under Xvfb.
+test-gui: $(VENV)/.installed
+	$(PY) scripts/build_extension.py --platforms linux-x64
+	$(PY) scripts/gui_test.py
+
+# The docs' pictures of the window (docs/window_*.png), taken the same way.
+docs-pictures: $(VENV)/.installed
+	$(PY) scripts/build_extension.py --platforms linux-x64
+	$(PY) scripts/gui_test.py --pictures docs

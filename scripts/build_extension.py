@@ -21,7 +21,7 @@ import zipfile
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 PACKAGES = {"scipy": "1.17.1", "fast-simplification": "0.2.0"}
-PYTHONS = ("3.11", "3.13")
+PYTHONS = ("3.11", "3.13", "3.14")
 #: Blender platform -> pip platform tags, best first. macOS arm64 takes scipy's macosx_12_0 wheel
 #: only (its macosx_14_0 wheel needs a newer macOS than Blender 4.2 does).
 PLATFORMS = {

@@ -22,7 +22,8 @@ from .blender import baking, handles, mesh_io, skin_rig
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
-from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession
+from .blender import drag_session
+from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession, moved_matrix
 from .blender.skin_rig import PREVIEW_ABOVE
 from .core import threads
 from .core.errors import SkinDetachError
@@ -32,7 +33,8 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "bake_file_path", "shutdown", "check_output_file", "DragSession", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
+           "bake_file_path", "shutdown", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
+           "handle_mirror", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
@@ -177,6 +179,25 @@ def clear(obj):
     skin_rig.clear(obj)
 
 
+def orphan_owner(obj):
+    """The deleted mesh object whose rig ``obj`` (a proxy, preview or handle) is left of, or None
+    (deleting a bound mesh in the viewport leaves its proxy and handles)."""
+    return skin_rig.orphan_owner(obj)
+
+
+def clear_orphan(obj):
+    """Remove what is left of a deleted mesh's rig, given any part ``obj`` of it; returns the
+    deleted mesh's name."""
+    return skin_rig.clear_orphan(obj)
+
+
+def before_save():
+    """Make every bound mesh consistent for a file written now (Blender's save_pre; the add-on
+    registers it): a drag that writes the mesh as it goes records what it wrote, so the saved
+    file holds the pose with its digest."""
+    drag_session.before_save()
+
+
 def _write_shown_pose(obj):
     """Where the preview stands in for ``obj``, write the pose it shows into the mesh in full detail
     (the mesh is shown again); the mesh is shown again even when that cannot be solved."""
@@ -230,6 +251,19 @@ def handle_kind(empty):
     """:data:`HANDLE` or :data:`ANCHOR` for a handle or anchor empty."""
     _check_handle(empty)
     return handles.kind_of(empty)
+
+
+def mirror_twin(empty):
+    """The mirror twin of a handle or anchor empty (made with it from the mesh's mirror toggle or
+    ``mirror``), or None."""
+    _check_handle(empty)
+    return handles.twin_of(empty)
+
+
+def handle_mirror(empty):
+    """The local axis ("X", "Y", "Z") a handle is mirrored across or symmetric about, or ""."""
+    _check_handle(empty)
+    return handles.mirror_of(empty)
 
 
 def handle_vertex_count(empty):

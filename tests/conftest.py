@@ -9,6 +9,8 @@ import pytest
 from bench.meshes import read_obj
 
 DATA = pathlib.Path(__file__).parent / "data"
+#: The GUI tests run inside a real Blender window (make test-gui, scripts/gui_test.py), not here.
+collect_ignore = ["gui"]
 
 
 @pytest.fixture(scope="session")

@@ -28,7 +28,7 @@ def _rigged(scene):
 def _state(obj):
     proxy = binding.proxy_of(obj)
     return (mesh_io.snapshot(obj.data)[0], mesh_io.snapshot(proxy.data)[0],
-            [np.array(child.matrix_basis) for child in proxy.children], binding.written_digest(obj))
+            [np.array(child.matrix_basis) for child in proxy.children], binding.written_state(obj)[0])
 
 
 def _diagonal(obj):

@@ -163,6 +163,7 @@ def store(obj, surface, rest, proxy, preview=None):
         "binding_id": uuid.uuid4().hex,
         "mesh_fingerprint": mesh_io.mesh_fingerprint(obj.data),
         "written_digest": mesh_io.positions_digest(rest),
+        "written_matrix": _world(obj),
         "proxy": proxy,
         "rest": np.ascontiguousarray(rest, dtype=np.float32).ravel(),
     }
@@ -331,24 +332,51 @@ def end_stand_in(obj):
 
 def check_unedited(obj):
     """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
-    if mesh_io.positions_digest(mesh_io.read_positions(obj.data)) != _stored(obj).get("written_digest"):
+    if not holds_written(obj):
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected the positions Skin Detach last wrote, they were "
                               f"edited since (sculpt or Edit Mode?); press Rebuild to bind the new shape, or Reset "
                               f"to return to the bound rest shape")
 
 
+def _world(obj):
+    """The object's world matrix, 16 float64 row-major (what a mesh's positions were written under)."""
+    return np.array(obj.matrix_world, dtype=np.float64).ravel()
+
+
 def mark_written(obj, positions):
-    """Record the digest of the (n, 3) positions just written."""
-    set_written_digest(obj, mesh_io.positions_digest(positions))
+    """Record the digest of the (n, 3) positions just written and the world matrix they were written under."""
+    set_written_state(obj, (mesh_io.positions_digest(positions), _world(obj)))
 
 
-def written_digest(obj):
-    """The digest of the positions Skin Detach last wrote into ``obj``'s mesh."""
-    return obj[KEY].get("written_digest")
+def written_state(obj):
+    """(digest of the positions Skin Detach last wrote into ``obj``'s mesh, the object's world
+    matrix then (16,) or None in files of earlier versions)."""
+    matrix = obj[KEY].get("written_matrix")
+    return obj[KEY].get("written_digest"), None if matrix is None else np.asarray(matrix, dtype=np.float64)
 
 
-def set_written_digest(obj, digest):
+def set_written_state(obj, state):
+    digest, matrix = state
     obj[KEY]["written_digest"] = digest
+    if matrix is None:
+        obj[KEY].pop("written_matrix", None)
+    else:
+        obj[KEY]["written_matrix"] = matrix
+
+
+def holds_written(obj):
+    """The mesh holds exactly what Skin Detach last wrote (or the rest shape it was bound with)."""
+    return mesh_io.positions_digest(mesh_io.read_positions(obj.data)) == _stored(obj).get("written_digest")
+
+
+def moved_since_written(obj):
+    """The object's world matrix differs from the one the mesh was last written under (None: not
+    known, a file of an earlier version)."""
+    _, matrix = written_state(obj)
+    if matrix is None:
+        return None
+    now = _world(obj)
+    return not np.allclose(now, matrix, rtol=1e-6, atol=1e-6 * max(1.0, float(np.abs(matrix).max())))
 
 
 def rest_positions(obj):

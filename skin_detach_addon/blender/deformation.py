@@ -61,12 +61,12 @@ class StepReport:
 class Snapshot:
     """What a step may change, saved bit for bit: the mesh (None when the session never writes it
     before it ends) and proxy positions (and shape keys, see :func:`mesh_io.snapshot`), every
-    handle's basis matrix by name, and the written digest."""
+    handle's basis matrix by name, and the written state (see :func:`binding.written_state`)."""
 
     mesh: tuple
     proxy: tuple
     matrices: dict
-    digest: str
+    written: tuple
 
 
 class Deformation:
@@ -135,7 +135,7 @@ class Deformation:
         confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
         result, detail = self.solve(tol, follow, budget_ms, idle)
-        return self._report(start, result, detail, mark)
+        return self._report(start, result, detail, mark, settling=budget_ms is not None)
 
     def commit(self):
         """Write the full detail rebuilt from the last solve (no new solve: what a drag showed,
@@ -144,11 +144,13 @@ class Deformation:
         axis, result, groups = self.solved
         return self._report(start, result, self._rebuild(axis, result, groups), True)
 
-    def _report(self, start, result, detail, mark):
+    def _report(self, start, result, detail, mark, settling=False):
+        """Write, and record the step's figures on the binding (``settling``: a budgeted step of a
+        drag, whose solve goes on while the mouse rests: not converged yet is no failure)."""
         self._write(detail, result.vertices, mark)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, detail)
-        self.binding.last_step = report.figures()
+        self.binding.last_step = dict(report.figures(), settling=settling and not result.converged)
         return report
 
     @property
@@ -173,7 +175,8 @@ class Deformation:
         self.show_preview(True, preview)
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
                             result.volume_change, positions)
-        self.binding.last_step = dict(report.figures(), preview=True)
+        self.binding.last_step = dict(report.figures(), preview=True,
+                                      settling=budget_ms is not None and not result.converged)
         return report
 
     def show_preview(self, shown, preview=None):
@@ -222,7 +225,7 @@ class Deformation:
         the mesh (``mesh=False``: None in its place) for a session that only writes the preview
         until it ends, so its cancel need not write millions of vertices back."""
         return Snapshot(mesh_io.snapshot(self.obj.data) if mesh else None, mesh_io.snapshot(self.proxy.data),
-                        {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_digest(self.obj))
+                        {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_state(self.obj))
 
     def restore(self, saved):
         """Everything back bit for bit from a :meth:`snapshot`: empties, mesh (and shape keys),
@@ -233,14 +236,14 @@ class Deformation:
         if saved.mesh is not None:
             mesh_io.restore(self.obj.data, saved.mesh)
         mesh_io.restore(self.proxy.data, saved.proxy)
-        stored.set_written_digest(self.obj, saved.digest)
+        stored.set_written_state(self.obj, saved.written)
         self.show_preview(False)
         self.binding.forget_warm_starts()
 
     def reset(self):
         """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame.
-        Refuses when the mesh now holds the rest shape under another transform (Apply Scale or
-        Rotation after binding): writing the rest would change its size or pose in the world."""
+        Refuses when the mesh was changed together with its object's transform since Skin Detach
+        last wrote it (Apply Rotation/Scale): the rest shape would land turned or resized."""
         self._check_no_applied_transform()
         empties = self.handles()
         frames = [handles.rest_local_of(empty) for empty in empties]  # all checked before anything moves
@@ -250,10 +253,23 @@ class Deformation:
         self.binding.forget_warm_starts()
 
     def _check_no_applied_transform(self):
+        """A mesh that holds what Skin Detach wrote is a pose of its own: any pose, rigid ones
+        included, resets. One edited since resets unless its object's transform changed too
+        (Apply moves a transform into the mesh) or it holds the rest shape under another linear
+        map (Apply after setting a transform on a mesh at rest, which may end where it began)."""
+        if stored.holds_written(self.obj):
+            return
+        if stored.moved_since_written(self.obj) or self._rest_under_another_map():
+            raise SkinDetachError(f"mesh {self.obj.data.name!r}: expected the shape Skin Detach last wrote or a "
+                                  f"sculpted one, the mesh and its object's transform both changed since (Apply "
+                                  f"Scale/Rotation after binding?); Reset would turn or resize it off its rig: press "
+                                  f"Rebuild to bind it as it is, or undo the Apply")
+
+    def _rest_under_another_map(self):
         current = mesh_io.read_positions(self.obj.data).astype(np.float64)
         rest = self.binding.rest.astype(np.float64)
-        if np.array_equal(current, rest) or current.shape[0] < 4:
-            return
+        if current.shape[0] < 4:
+            return False
         # Least-squares affine map rest -> current; exact (to float32 rounding) and not the identity
         # means the object's transform was applied into the mesh.
         ones = np.ones((rest.shape[0], 1))
@@ -262,8 +278,4 @@ class Deformation:
         solution, *_ = np.linalg.lstsq(design, current, rcond=None)
         residual = np.abs(design @ solution - current).max()
         size = max(float(np.ptp(rest, axis=0).max()), 1e-30)
-        linear = solution[:3].T
-        if residual <= 1e-5 * size and np.abs(linear - np.eye(3)).max() > 1e-4:
-            raise SkinDetachError(f"mesh {self.obj.data.name!r}: expected the bound rest shape or a sculpted one, "
-                                  f"it holds the rest shape under another scale or rotation (Apply Scale/Rotation "
-                                  f"after binding?); press Rebuild to bind it as it is (Reset would change its size)")
+        return bool(residual <= 1e-5 * size and np.abs(solution[:3].T - np.eye(3)).max() > 1e-4)

@@ -7,14 +7,37 @@ region (``ui.region_view.RegionView``); tests pass their own.
 """
 
 import math
+import weakref
 
+import numpy as np
 from mathutils import Matrix, Vector
 
 from ..core.errors import SkinDetachError
+from ..core.geometry import bbox_diagonal
+from . import binding as stored
+from . import mesh_io
 from .deformation import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
+#: A typed move goes at most this many times the mesh's size (world diagonal) ...
+TYPED_MOVE_SIZES = 10.0
+#: ... a typed scale factor is at most this (and at least its inverse) in magnitude ...
+TYPED_SCALE = 100.0
+#: ... and a typed number has at most this many characters.
+TYPED_CHARACTERS = 10
+#: Sessions between their start and their confirm or cancel (see :func:`before_save`).
+_RUNNING = weakref.WeakSet()
+
+
+def before_save():
+    """A file is about to be written: every running drag that writes the mesh as it goes
+    records the positions it wrote (with the transform they were written under), so the file
+    holds its pose with a matching digest; its cancel restores the digest as well. A drag
+    showing the preview leaves the mesh to the live update's settle (and keeps its guard)."""
+    for session in list(_RUNNING):
+        if not session.previewing and session.last is not None:
+            stored.mark_written(session.obj, mesh_io.read_positions(session.obj.data))
 _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
 _CONFIRM = {"LEFTMOUSE", "RET", "NUMPAD_ENTER"}
 _CANCEL = {"RIGHTMOUSE", "ESC"}
@@ -33,6 +56,15 @@ def _typed(text, key):
     if key == "." and "." in text:
         return text
     return text + key
+
+
+def moved_matrix(start, translation, rotation, scale):
+    """(4, 4) world matrix of a handle whose world matrix was ``start``, scaled by ``scale`` (3,)
+    along the world axes, then turned by the (3, 3) ``rotation``, both about its own position,
+    then moved by ``translation`` (3,): what a drag does, and what its Redo panel redoes."""
+    pivot = start.to_translation()
+    linear = Matrix(rotation).to_3x3() @ Matrix.Diagonal(Vector(scale))
+    return Matrix.Translation(pivot + Vector(translation)) @ linear.to_4x4() @ Matrix.Translation(-pivot) @ start
 
 
 def _stretch(factor, axis):
@@ -88,10 +120,17 @@ class DragSession:
         self.mode, self.axis = "MOVE", None
         self.translation, self.angle = Vector((0.0, 0.0, 0.0)), 0.0
         self.stretch = Matrix.Identity(3)
+        #: What the drag did to the handle, as :func:`moved_matrix` takes it: translation (3,),
+        #: rotation (3, 3), scale (3,) along the world axes (a stretch is always along them).
+        self.motion = (Vector((0.0, 0.0, 0.0)), Matrix.Identity(3), Vector((1.0, 1.0, 1.0)))
         self.typed = ""
         self._reference = Vector(mouse)
         self.step_ms = []
         self.last = None
+        corners = [obj.matrix_world @ Vector(corner) for corner in obj.bound_box]
+        #: The mesh's size in the world (its bounding box diagonal), which bounds typed moves.
+        self.size = max(bbox_diagonal(np.array([c[:] for c in corners])), 1e-9)
+        _RUNNING.add(self)
         #: The shown shape is the solve certified to the settle tolerance (nothing left to do).
         self.settled = False
         #: Why the last keystroke was refused ("" when it was not).
@@ -138,11 +177,13 @@ class DragSession:
             before = self.typed
             self.typed = self.typed[:-1] if kind == "BACK_SPACE" else _typed(self.typed, _TYPED[kind])
             try:
+                if len(self.typed.lstrip("-")) > TYPED_CHARACTERS:
+                    raise SkinDetachError(f"at most {TYPED_CHARACTERS} digits")
                 self._apply_typed()
                 self.refused = ""
             except SkinDetachError as exc:  # the keystroke is refused, the drag goes on
                 self.typed = before
-                self.refused = f"{kind} refused: {exc}"
+                self.refused = f"{_TYPED.get(kind, kind)!r} refused: {str(exc)[:100]}"
                 self._apply_typed()
         elif kind in _AXES or kind in _MODES:
             if not self.typed:
@@ -166,13 +207,22 @@ class DragSession:
             number = None
         translation, angle, stretch = self.translation.copy(), self.angle, self.stretch.copy()
         if number is not None:
+            self._check_typed(number)
             if self.mode == "MOVE":
                 translation += _AXES[self.axis or "X"] * number
             elif self.mode == "ROTATE":
                 angle += math.radians(number)
             else:
                 stretch = _stretch(number, self.axis) @ stretch
-        self._place(self._compose(translation, angle, stretch))
+        self._place(translation, angle, stretch)
+
+    def _check_typed(self, number):
+        """Raise (a short message, for the header) for a typed number that would fling the mesh away."""
+        if self.mode == "MOVE" and abs(number) > TYPED_MOVE_SIZES * self.size:
+            raise SkinDetachError(f"a move of at most {TYPED_MOVE_SIZES * self.size:.4g} "
+                                  f"({TYPED_MOVE_SIZES:g}x the mesh's size)")
+        if self.mode == "SCALE" and not 1.0 / TYPED_SCALE <= abs(number) <= TYPED_SCALE:
+            raise SkinDetachError(f"a scale of {1.0 / TYPED_SCALE:g} to {TYPED_SCALE:g} (or its negative)")
 
     def _settle(self, mouse):
         """Keep what the mouse did so far and measure from ``mouse`` on."""
@@ -201,19 +251,20 @@ class DragSession:
 
     def matrix(self, mouse):
         """World matrix of the empty for the mouse at ``mouse``."""
-        return self._compose(*self._offsets(Vector(mouse)))
+        return moved_matrix(self.start, *self._motion(*self._offsets(Vector(mouse))))
 
-    def _compose(self, translation, angle, stretch):
-        axis = _AXES[self.axis] if self.axis else -Vector(self.view.direction)
-        turn = Matrix.Rotation(angle, 4, axis)
-        return (Matrix.Translation(self.pivot + translation) @ turn @ stretch.to_4x4() @
-                Matrix.Translation(-self.pivot)) @ self.start
+    def _turn(self, angle):
+        return Matrix.Rotation(angle, 3, _AXES[self.axis] if self.axis else -Vector(self.view.direction))
+
+    def _motion(self, translation, angle, stretch):
+        return translation.copy(), self._turn(angle), Vector([stretch[i][i] for i in range(3)])
 
     def _follow(self, mouse):
-        self._place(self.matrix(mouse))
+        self._place(*self._offsets(mouse))
 
-    def _place(self, matrix):
-        self.empty.matrix_world = matrix
+    def _place(self, translation, angle, stretch):
+        self.motion = self._motion(translation, angle, stretch)
+        self.empty.matrix_world = moved_matrix(self.start, *self.motion)
         self._show(DRAG_TOL, DRAG_BUDGET_MS)
         self.step_ms.append(self.last.milliseconds)
 
@@ -238,6 +289,7 @@ class DragSession:
         """Keep the result: a settled drag's shape as shown (in full detail), else the last
         move's shape certified to the settle tolerance (continued from it)."""
         self.deformation.binding.mesh_guard = None
+        _RUNNING.discard(self)
         if self.last is not None:
             self.last = self.deformation.commit() if self.settled else self.deformation.step(follow=True)
         return FINISHED
@@ -245,6 +297,7 @@ class DragSession:
     def cancel(self):
         """Everything back bit for bit: empties, mesh (and shape keys), proxy, stored digest."""
         guard, self.deformation.binding.mesh_guard = self.deformation.binding.mesh_guard, None
+        _RUNNING.discard(self)
         if self._saved.mesh is None and guard:  # written meanwhile by a save: put it back too
             self._saved.mesh = guard["mesh"]
         self.deformation.restore(self._saved)

@@ -13,6 +13,8 @@ from . import binding as stored
 from . import handles, mesh_io
 
 RIG_COLLECTION = "Skin Detach"
+#: A collection the add-on made carries its role under this key ("Skin Detach", "Skin Detach Bake").
+COLLECTION_TAG = "_skin_detach_collection"
 PROXY_TAG = stored.PROXY_TAG
 PREVIEW_TAG = stored.PREVIEW_TAG
 #: Meshes with more vertices than this get a preview by default (see :func:`build`): a drag move
@@ -39,16 +41,60 @@ def check_mesh_object(obj):
                               f"{len(obj.data.vertices)} vertices and {len(obj.data.polygons)} faces")
 
 
-def mesh_of(obj):
-    """The detail mesh object that ``obj`` stands for: its proxy's or handle's mesh, else ``obj`` itself."""
-    if obj is None:
-        return None
+def _is_rig_part(obj):
+    return handles.is_handle(obj) or PROXY_TAG in obj or PREVIEW_TAG in obj
+
+
+def _recorded_owner(obj):
+    """The mesh object a proxy, preview or handle records as its own (deleted or not), else None."""
     if handles.is_handle(obj):
         return handles.owner(obj)
     for tag in (PROXY_TAG, PREVIEW_TAG):
         if tag in obj:
             return obj[tag]
-    return obj
+    return None
+
+
+def _deleted(obj):
+    """``obj`` is in no scene: deleted in the viewport (a pointer of its rig may keep it alive)."""
+    return obj is None or getattr(obj, "type", None) is None or not obj.users_scene
+
+
+def mesh_of(obj):
+    """The detail mesh object that ``obj`` stands for: its proxy's or handle's mesh, else ``obj``
+    itself; None for nothing and for a part of a rig whose mesh was deleted (see :func:`orphan_owner`)."""
+    if obj is None or not _is_rig_part(obj):
+        return obj
+    owner = _recorded_owner(obj)
+    return None if _deleted(owner) else owner
+
+
+def orphan_owner(obj):
+    """The deleted mesh object whose rig ``obj`` (a proxy, preview or handle) is left of, or None."""
+    if obj is None or not _is_rig_part(obj):
+        return None
+    owner = _recorded_owner(obj)
+    return owner if owner is not None and _deleted(owner) else None
+
+
+def clear_orphan(obj):
+    """Remove what is left of the rig of a deleted mesh: ``obj`` (a part of it) and its proxy,
+    preview and handles. Returns the deleted mesh's name."""
+    import bpy
+    owner = orphan_owner(obj)
+    if owner is None:
+        raise SkinDetachError(f"object {_name(obj)}: expected a part of a rig whose mesh was deleted, got "
+                              f"{'a part of a live rig' if mesh_of(obj) is not None else 'no rig part'}")
+    name = owner.name
+    parts = [o for o in bpy.data.objects if _recorded_owner(o) == owner]
+    collections = {c for part in parts for c in part.users_collection}
+    for part in sorted(parts, key=lambda o: not handles.is_handle(o)):  # handles first: they hang on the proxy
+        if handles.is_handle(part):
+            handles.remove(part)
+        else:
+            remove_with_mesh(part)
+    _remove_empty(collections)
+    return name
 
 
 def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, progress=None):
@@ -108,7 +154,7 @@ def _new_mesh_object(name, points, faces, owner, tag):
     mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
     mesh.update()
     made = bpy.data.objects.new(name, mesh)
-    scene_collection(RIG_COLLECTION).objects.link(made)
+    scene_collection(RIG_COLLECTION, scene_of(owner)).objects.link(made)
     made.parent = owner
     made.matrix_parent_inverse = Matrix.Identity(4)
     made.matrix_basis = Matrix.Identity(4)
@@ -121,6 +167,7 @@ def _make_proxy(obj, surface):
     proxy = _new_mesh_object(f"{obj.name}_proxy", surface.proxy_vertices, surface.proxy_faces, obj, PROXY_TAG)
     proxy.display_type = 'WIRE'
     proxy.show_in_front = True
+    proxy.hide_select = True  # drawn in front, it would take the first click meant for the mesh
     return proxy
 
 
@@ -135,16 +182,36 @@ def _make_preview(obj, preview):
     return made
 
 
-def scene_collection(name):
-    """The collection ``name`` (made if missing), linked under the current scene's collection."""
+def scene_of(obj):
+    """The scene a rig of ``obj`` goes into: the current one when ``obj`` is in it, else its first."""
     import bpy
     scene = bpy.context.scene
-    collection = bpy.data.collections.get(name)
-    if collection is None:
-        collection = bpy.data.collections.new(name)
-    if collection.name not in scene.collection.children:
-        scene.collection.children.link(collection)
+    return scene if obj.name in scene.objects or not obj.users_scene else obj.users_scene[0]
+
+
+def scene_collection(name, scene=None):
+    """The add-on's collection ``name`` directly under ``scene``'s collection (default: the current
+    scene), made and linked there if missing: each scene has its own, so a new scene never shows
+    another scene's rig (Blender would share one found by name)."""
+    import bpy
+    scene = scene or bpy.context.scene
+    for child in scene.collection.children:
+        if child.get(COLLECTION_TAG) == name:
+            return child
+    collection = bpy.data.collections.new(name)
+    collection[COLLECTION_TAG] = name
+    scene.collection.children.link(collection)
     return collection
+
+
+def _remove_empty(collections):
+    """Remove those of ``collections`` that are the add-on's rig collections and hold nothing now
+    (also the untagged one of files from earlier versions)."""
+    import bpy
+    for collection in collections:
+        if (collection.get(COLLECTION_TAG) == RIG_COLLECTION or collection.name == RIG_COLLECTION) \
+                and not collection.all_objects:
+            bpy.data.collections.remove(collection)
 
 
 def _remove_proxy(obj):
@@ -194,14 +261,13 @@ def selection(context):
 
 def clear(obj):
     """Remove the proxy, every handle and the stored binding of ``obj``; the mesh keeps its shape."""
-    import bpy
+    proxy = stored.proxy_of(obj)
+    collections = set(proxy.users_collection) if proxy is not None else set()
     for empty in handles.handles_of(obj):
         handles.remove(empty)
     _remove_proxy(obj)
     stored.forget(obj)
-    collection = bpy.data.collections.get(RIG_COLLECTION)
-    if collection is not None and not collection.all_objects:
-        bpy.data.collections.remove(collection)
+    _remove_empty(collections)
 
 
 def _name(obj):

@@ -5,7 +5,7 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 import bpy
 
 from .. import api
-from . import live_update, menus, operators, panel, properties
+from . import live_update, menus, operators, panel, properties, saving
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
 
@@ -15,11 +15,13 @@ def register():
         bpy.utils.register_class(cls)
     properties.register()
     live_update.register()
+    saving.register()
     menus.register()
 
 
 def unregister():
     menus.unregister()
+    saving.unregister()
     live_update.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):

@@ -1,6 +1,8 @@
-"""Where Blender users look for commands: a Skin Detach submenu in the 3D View's Object menu (so F3
-menu search finds every operator), the same entries in the object context menu (right click),
-and an add-on keymap entry for Drag Handle that users can change in Preferences > Keymap."""
+"""Where Blender users look for commands: a Skin Detach submenu in the 3D View's Object menu and,
+in Edit Mode, its Mesh menu (so F3 menu search finds every operator in both modes), the same
+submenu in the object context menu (right click), Add Handle and Add Anchor in Edit Mode's
+context menu, and an add-on keymap entry for Drag Handle that users can change in Preferences >
+Keymap."""
 
 import bpy
 
@@ -30,13 +32,23 @@ def _menu_entry(self, context):
     self.layout.menu(VIEW3D_MT_skin_detach.bl_idname)
 
 
+def _edit_context_entries(self, context):
+    """Edit Mode's right-click menu: what an artist does with selected vertices."""
+    layout = self.layout
+    layout.separator()
+    layout.operator("skin_detach.add_handle", icon='EMPTY_SINGLE_ARROW')
+    layout.operator("skin_detach.add_anchor", icon='PINNED')
+
+
 CLASSES = (VIEW3D_MT_skin_detach,)
-_MENUS = ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu")
+#: Menu -> the entry appended to it.
+_MENUS = {"VIEW3D_MT_object": _menu_entry, "VIEW3D_MT_object_context_menu": _menu_entry,
+          "VIEW3D_MT_edit_mesh": _menu_entry, "VIEW3D_MT_edit_mesh_context_menu": _edit_context_entries}
 
 
 def register():
-    for name in _MENUS:
-        getattr(bpy.types, name).append(_menu_entry)
+    for name, entry in _MENUS.items():
+        getattr(bpy.types, name).append(entry)
     keyconfig = bpy.context.window_manager.keyconfigs.addon
     if keyconfig is not None:  # none in background mode
         keymap = keyconfig.keymaps.new(name="Object Mode", space_type='EMPTY')
@@ -48,5 +60,5 @@ def unregister():
     for keymap, item in _keymaps:
         keymap.keymap_items.remove(item)
     _keymaps.clear()
-    for name in _MENUS:
-        getattr(bpy.types, name).remove(_menu_entry)
+    for name, entry in _MENUS.items():
+        getattr(bpy.types, name).remove(entry)

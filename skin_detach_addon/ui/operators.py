@@ -2,7 +2,7 @@
 :meth:`_Operator.execute` / :meth:`DragOperator.invoke`, and nothing has been written by then."""
 
 import bpy
-from mathutils import Vector
+from mathutils import Euler
 
 from .. import api
 from ..api import SkinDetachError
@@ -128,8 +128,11 @@ class _AddOperator(_BoundOperator):
             obj.select_set(False)
         empty.select_set(True)
         context.view_layer.objects.active = empty  # ready to drag
-        twin = " and its mirrored twin" if mirror else ""
-        self.report({'INFO'}, f"Skin Detach: {empty.name}{twin} holds {api.handle_vertex_count(empty)} proxy vertices")
+        twin = api.mirror_twin(empty)
+        axis = api.handle_mirror(empty)
+        made = f" and its mirrored twin {twin.name} (across {axis})" if twin is not None else \
+            f" (its own mirror image across {axis}: it moves symmetrically)" if axis else ""
+        self.report({'INFO'}, f"Skin Detach: {empty.name}{made} holds {api.handle_vertex_count(empty)} proxy vertices")
         return {'FINISHED'}
 
 
@@ -205,8 +208,14 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
     bl_idname = "skin_detach.drag"
     bl_label = "Drag Handle"
     bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
-    offset: bpy.props.FloatVectorProperty(name="Offset", subtype='TRANSLATION', size=3,
-                                          description="World-space move of the handle (scripted use)")
+    # What the drag did, shown in the Redo panel (and the scripted use): scale along the world
+    # axes and rotation about the handle's position, then the move; see api.moved_matrix.
+    offset: bpy.props.FloatVectorProperty(name="Move", subtype='TRANSLATION', size=3,
+                                          description="World-space move of the handle")
+    rotation: bpy.props.FloatVectorProperty(name="Rotation", subtype='EULER', size=3,
+                                            description="Turn of the handle about its own position (world axes)")
+    scale: bpy.props.FloatVectorProperty(name="Scale", subtype='XYZ', size=3, default=(1.0, 1.0, 1.0),
+                                         description="Scale of the handle along the world axes about its position")
 
     @classmethod
     def poll(cls, context):
@@ -214,11 +223,11 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
             api.handle_kind(context.active_object) == api.HANDLE
 
     def run(self, context):
-        """Scripted path: move the active handle by ``offset`` and solve."""
+        """Scripted path and the Redo panel: move the active handle as the properties say and solve."""
+        context.view_layer.update()  # after the Redo panel's undo, world matrices are not evaluated yet
         empty = context.active_object
-        world = empty.matrix_world.copy()
-        world.translation += Vector(self.offset)
-        empty.matrix_world = world
+        empty.matrix_world = api.moved_matrix(empty.matrix_world.copy(), self.offset,
+                                              Euler(self.rotation).to_matrix(), self.scale)
         return deform_and_report(self, context)
 
     def invoke(self, context, event):
@@ -260,6 +269,9 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
         if state in (api.FINISHED, api.CANCELLED):
             self._end_timer(context)
             context.area.header_text_set(None)
+            if state == api.FINISHED:  # the Redo panel shows (and redoes) what the drag did
+                translation, rotation, scale = self.session.motion
+                self.offset, self.rotation, self.scale = translation, rotation.to_euler(), scale
             if state == api.FINISHED and self.session.step_ms:
                 ms = sorted(self.session.step_ms)[len(self.session.step_ms) // 2]
                 level, text = solve_report(self.session.last.figures())
@@ -288,15 +300,24 @@ class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
         return {'FINISHED'}
 
 
-class SKIN_DETACH_OT_clear(_BoundOperator, bpy.types.Operator):
-    """Remove the proxy, the handles and the binding (the mesh keeps its current shape)"""
+class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
+    """Remove the proxy, the handles and the binding (the mesh keeps its current shape); on what is
+    left of the rig of a deleted mesh, remove that"""
     bl_idname = "skin_detach.clear"
     bl_label = "Clear Skin"
     bl_options = {'REGISTER', 'UNDO'}
 
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None or api.orphan_owner(context.active_object) is not None
+
     def run(self, context):
         obj = bound_owner(context)
-        if context.active_object is not obj:
+        if obj is None:
+            name = api.clear_orphan(context.active_object)
+            self.report({'INFO'}, f"Skin Detach: removed the rig of the deleted mesh {name!r}")
+            return {'FINISHED'}
+        if context.active_object is not obj and obj.name in context.view_layer.objects:
             context.view_layer.objects.active = obj
         api.clear(obj)
         self.report({'INFO'}, f"Skin Detach: cleared {obj.name}")

@@ -36,9 +36,11 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.add_handle", icon='ADD')
         row.operator("skin_detach.add_anchor", icon='PINNED')
-        box.prop(settings, "mirror", expand=True)
         row = box.row(align=True)
-        row.prop_search(settings, "handle_group", obj, "vertex_groups", text="")
+        row.label(text="Mirror")
+        row.prop(settings, "mirror", expand=True)
+        row = box.row(align=True)
+        row.prop_search(settings, "handle_group", obj, "vertex_groups", text="Group")
         if settings.handle_group:
             row.operator("skin_detach.add_handle", text="", icon='ADD').group = settings.handle_group
             row.operator("skin_detach.add_anchor", text="", icon='PINNED').group = settings.handle_group
@@ -61,6 +63,10 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
                 conflict = conflicts[empty.name]
                 box.label(text=f"  shares {conflict['shared']} proxy vertices with {conflict['winner']}, "
                                f"which wins there", icon='INFO')
+
+        proxy = api.proxy_of(obj)
+        if proxy is not None:  # off by default: drawn in front, the proxy would take the clicks meant for the mesh
+            box.prop(proxy, "hide_select", text="Select Proxy", invert_checkbox=True, icon='RESTRICT_SELECT_OFF')
 
         box = layout.box()
         box.label(text="Deform", icon='MOD_SIMPLEDEFORM')
@@ -93,11 +99,14 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         if last is None:
             box.label(text="Last step: -")
         else:
-            volume = "" if last["volume_change"] != last["volume_change"] else \
-                f", volume {100 * last['volume_change']:+.2f} %"
             shown = " (preview)" if last.get("preview") else ""
-            box.label(text=f"Last step{shown}: {last['milliseconds']:.1f} ms, {last['iterations']} iterations{volume}")
-            if not last["converged"]:
+            box.label(text=f"Last step{shown}: {last['milliseconds']:.1f} ms")
+            box.label(text=f"  {last['iterations']} iterations")
+            if last["volume_change"] == last["volume_change"]:
+                box.label(text=f"  Volume {100 * last['volume_change']:+.2f} %")
+            if last.get("settling"):
+                box.label(text="  Settling while the mouse rests", icon='TIME')
+            elif not last["converged"]:
                 box.label(text="The last solve did not converge", icon='ERROR')
 
 
