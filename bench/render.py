@@ -2,7 +2,7 @@
 seen orthographically from the front; Workbench, or Cycles on the CPU where there is no OpenGL.
 
 Colours are materials (Workbench shows them with ``color_type='MATERIAL'``, Cycles renders
-them), so one mesh can show regions in their own colours (:func:`paint_faces`).
+them).
 """
 
 import numpy as np
@@ -21,27 +21,6 @@ def colour_object(obj, colour):
     """``obj`` (mesh or text) drawn in ``colour`` (RGBA)."""
     obj.data.materials.clear()
     obj.data.materials.append(material(f"{obj.name}_colour", colour))
-
-
-def paint_faces(obj, regions, base=(0.72, 0.72, 0.72, 1.0)):
-    """``obj``'s faces in ``base``, and each face with a vertex in ``regions[k]`` ((ids (k,), RGBA)
-    pairs, later ones on top) in that region's colour."""
-    mesh = obj.data
-    mesh.materials.clear()
-    mesh.materials.append(material(f"{obj.name}_base", base))
-    corners = np.empty(len(mesh.loops), dtype=np.int32)
-    mesh.loops.foreach_get("vertex_index", corners)
-    starts = np.empty(len(mesh.polygons), dtype=np.int32)
-    mesh.polygons.foreach_get("loop_start", starts)
-    owner = np.repeat(np.arange(len(mesh.polygons)), np.diff(np.r_[starts, corners.size]))
-    index = np.zeros(len(mesh.polygons), dtype=np.int32)
-    for k, (ids, colour) in enumerate(regions, start=1):
-        mesh.materials.append(material(f"{obj.name}_region{k}", colour))
-        marked = np.zeros(len(mesh.vertices), dtype=bool)
-        marked[np.asarray(ids, dtype=np.int64)] = True
-        index[np.unique(owner[marked[corners]])] = k
-    mesh.polygons.foreach_set("material_index", index)
-    mesh.update()
 
 
 def world_points(obj):

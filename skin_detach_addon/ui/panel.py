@@ -1,9 +1,22 @@
 """The "Skin Detach" tab of the 3D View sidebar."""
 
+import textwrap
+
 import bpy
 
 from .. import api
 from .live_update import ERRORS
+
+
+#: Characters of a label line that fit the sidebar at its default width beside an icon (about
+#: 180 pixels of Blender's UI font at 100 %); longer texts are wrapped.
+LINE_CHARACTERS = 30
+
+
+def wrapped_label(layout, text, icon='NONE'):
+    """``text`` as label lines of at most :data:`LINE_CHARACTERS` (the icon on the first)."""
+    for k, line in enumerate(textwrap.wrap(text, LINE_CHARACTERS) or [""]):
+        layout.label(text=line, icon=icon if k == 0 else 'BLANK1')
 
 
 class VIEW3D_PT_skin_detach(bpy.types.Panel):
@@ -28,7 +41,7 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
             layout.label(text="Select a mesh object", icon='INFO')
             return
         if not bound:
-            layout.label(text=f"{obj.name}: not bound", icon='INFO')
+            wrapped_label(layout, f"{obj.name}: not bound", icon='INFO')
             return
 
         box = layout.box()
@@ -61,8 +74,8 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
             row.operator("skin_detach.remove_handle", text="", icon='X').name = empty.name
             if empty.name in conflicts:
                 conflict = conflicts[empty.name]
-                box.label(text=f"  shares {conflict['shared']} proxy vertices with {conflict['winner']}, "
-                               f"which wins there", icon='INFO')
+                wrapped_label(box, f"shares {conflict['shared']} proxy vertices with {conflict['winner']}, "
+                                   f"which wins there", icon='INFO')
 
         proxy = api.proxy_of(obj)
         if proxy is not None:  # off by default: drawn in front, the proxy would take the clicks meant for the mesh
@@ -79,7 +92,7 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row.operator("skin_detach.reset", icon='LOOP_BACK')
         row.operator("skin_detach.clear", icon='TRASH')
         if obj.name in ERRORS:
-            box.label(text=ERRORS[obj.name], icon='ERROR')
+            wrapped_label(box, ERRORS[obj.name], icon='ERROR')
 
         figures = api.figures(obj)
         stats = figures["build"]
@@ -88,10 +101,12 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
         if stats.get("target_reached") is False:
-            box.label(text=f"  target {stats.get('target_faces', 0):,}: the normal test stopped above it", icon='INFO')
+            wrapped_label(box, f"Target {stats.get('target_faces', 0):,} faces not reached: the normal test stopped "
+                               f"above it", icon='INFO')
         if stats.get("preview_vertices"):
-            note = "" if stats.get("detail_vertices", 0) > settings.preview_above else " (not used: below Preview Above)"
-            box.label(text=f"Preview: {stats['preview_vertices']:,} vertices{note}")
+            box.label(text=f"Preview: {stats['preview_vertices']:,} vertices")
+            if stats.get("detail_vertices", 0) <= settings.preview_above:
+                box.label(text="  not used: below Preview Above")
         elif stats.get("detail_vertices", 0) > settings.preview_above:
             box.label(text="No preview: Rebuild to make one", icon='INFO')
         box.label(text=f"Build: {stats.get('seconds', {}).get('total', 0.0):.2f} s")

@@ -128,18 +128,25 @@ def test_typed_values_cannot_fling_the_mesh(ui):
 def test_panel_texts_are_labelled_and_fit_the_sidebar(ui):
     yield from ui.setup()
     obj, handle = rigs.rig(ui)
+    sd = rigs.api()
     group = obj.vertex_groups.new(name="cap")
     group.add([0, 1, 2], 1.0, 'REPLACE')
-    handle.location.x += 0.3
-    rigs.api().deform(obj)
+    sd.build(obj, target_faces=8)  # the normal test stops above so small a target: the panel says so
+    wider = sd.add_handle(obj, np.flatnonzero(sd.rest_positions(obj)[:, 2] > 0.4), mirror="")  # shares vertices
+    wider.location.x += 0.3
+    sd.deform(obj)
     rigs.activate(ui, obj)
     yield 0.3
     lines = panel_lines()
     texts = [text for _, text, _ in lines]
+    assert any("not reached" in text for text in texts) and any("shares" in text for text in texts), texts
     assert "Mirror" in texts, "the Mirror choice has no label"
     assert "Group" in texts, "the vertex group field has no label"
     scale = bpy.context.preferences.system.ui_scale
-    blf.size(0, 11 * scale)
-    room = ui.sidebar.width - 40 * scale  # the box's margins and the icon
-    too_wide = [text for kind, text, _ in lines if kind == "label" and blf.dimensions(0, text)[0] > room]
+    blf.size(0, 11 * scale)  # Blender's UI text at 100 %
+    # Room of a label in a box of the sidebar at its default width, measured in this window: the
+    # category tabs, the box's margins, and the icon when there is one.
+    room = {False: ui.sidebar.width - 72 * scale, True: ui.sidebar.width - 104 * scale}
+    too_wide = [text for kind, text, icon in lines
+                if kind == "label" and blf.dimensions(0, text)[0] > room[icon != 'NONE']]
     assert not too_wide, f"cut at the sidebar's default width ({ui.sidebar.width} px): {too_wide}"
