@@ -75,3 +75,12 @@ def test_redo_panel_redoes_the_drag(ui):
     size = np.ptp(after, axis=0)
     assert np.isfinite(after).all() and size.min() > 1.5, f"the mesh collapsed: extent {size}"
     assert not np.allclose(after, dragged), "the redo changed nothing"
+    # The drag's own X typed back: the drag as it was (solved from rest, as Apply solves).
+    yield from ui.click(x, y, wait=0.3)
+    yield from ui.press('A', ctrl=True)
+    yield from ui.type(f"{moved.x:.6f}")
+    yield from ui.press('RET', wait=2.0)
+    obj = bpy.data.objects[names[1]]
+    again = rigs.positions(obj)
+    assert np.abs(again - dragged).max() < 1e-3 * np.ptp(dragged, axis=0).max(), \
+        f"the redo with the drag's own values differs from the drag by {np.abs(again - dragged).max()}"
