@@ -69,3 +69,30 @@ def test_a_save_during_a_drag_opens_consistent(ui):
     # The saved file, opened in this Blender with its add-on: Apply Handles takes it.
     opened = rigs.in_blender(path, "obj = bpy.data.objects['Sphere']; print('SOLVED', api.deform(obj)['converged'])")
     assert "SOLVED True" in opened, f"the saved file refuses its mesh: {opened[-600:]}"
+
+
+def test_undo_redo_and_save_by_keys(ui):
+    yield from ui.setup()
+    obj, handle = rigs.rig(ui)
+    rest = rigs.positions(obj).copy()
+    path = os.path.join(tempfile.mkdtemp(), "keys.blend")
+    with bpy.context.temp_override(window=ui.window):
+        bpy.ops.wm.save_as_mainfile(filepath=path)  # set-up: the file has a name, so Ctrl+S saves it
+    yield from rigs.drag(ui, 60, 20)
+    posed = rigs.positions(obj).copy()
+    assert not np.allclose(posed, rest)
+    yield from ui.hover_view()
+    yield from ui.press('Z', ctrl=True, wait=1.0)
+    obj = bpy.data.objects["Sphere"]
+    assert np.array_equal(rigs.positions(obj), rest), "Ctrl+Z did not bring the rest shape back"
+    yield from ui.press('Z', ctrl=True, shift=True, wait=1.0)
+    obj = bpy.data.objects["Sphere"]
+    assert np.array_equal(rigs.positions(obj), posed), "Ctrl+Shift+Z did not bring the drag back"
+    yield from ui.press('S', ctrl=True, wait=1.5)
+    opened = rigs.in_blender(path, "import numpy as np; obj = bpy.data.objects['Sphere']; "
+                                   "before = np.array([v.co[:] for v in obj.data.vertices]); api.deform(obj); "
+                                   "after = np.array([v.co[:] for v in obj.data.vertices]); "
+                                   "print('SAVED', float(np.abs(after - before).max()))")
+    assert "SAVED" in opened, f"the file saved by Ctrl+S does not solve: {opened[-600:]}"
+    change = float(opened.split("SAVED", 1)[1].split()[0])
+    assert change < 1e-3, f"the saved pose and its handles disagree by {change}"
