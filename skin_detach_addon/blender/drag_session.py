@@ -28,16 +28,6 @@ TYPED_SCALE = 100.0
 TYPED_CHARACTERS = 10
 #: Sessions between their start and their confirm or cancel (see :func:`before_save`).
 _RUNNING = weakref.WeakSet()
-
-
-def before_save():
-    """A file is about to be written: every running drag that writes the mesh as it goes
-    records the positions it wrote (with the transform they were written under), so the file
-    holds its pose with a matching digest; its cancel restores the digest as well. A drag
-    showing the preview leaves the mesh to the live update's settle (and keeps its guard)."""
-    for session in list(_RUNNING):
-        if not session.previewing and session.last is not None:
-            stored.mark_written(session.obj, mesh_io.read_positions(session.obj.data))
 _AXES = {"X": Vector((1, 0, 0)), "Y": Vector((0, 1, 0)), "Z": Vector((0, 0, 1))}
 _CONFIRM = {"LEFTMOUSE", "RET", "NUMPAD_ENTER"}
 _CANCEL = {"RIGHTMOUSE", "ESC"}
@@ -302,3 +292,16 @@ class DragSession:
             self._saved.mesh = guard["mesh"]
         self.deformation.restore(self._saved)
         return CANCELLED
+
+
+def before_save():
+    """A file is about to be written: every running drag that writes the mesh as it goes
+    records the positions it wrote (with the transform they were written under), so the file
+    holds its pose with a matching digest; its cancel restores the digest as well. A drag
+    showing the preview leaves the mesh to the live update's settle (and keeps its guard)."""
+    for session in list(_RUNNING):
+        try:
+            if not session.previewing and session.last is not None:
+                stored.mark_written(session.obj, mesh_io.read_positions(session.obj.data))
+        except ReferenceError:  # its objects went with a file loaded during the drag: it is over
+            _RUNNING.discard(session)
