@@ -216,3 +216,29 @@ def test_ctrl_c_stops_a_bake_with_complete_files_and_exit_130(rig_file, tmp_path
     assert process.returncode == 130 and "interrupted" in err, err[-2000:]
     written = sorted(tmp_path.glob("i_*.obj"))
     assert 0 < len(written) < 2000 and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.parametrize("output", [r"\\server\share\bake\q_####.obj", "C:/bake/q_####.obj", r"bake\q_####.obj"])
+def test_a_windows_output_fails_on_this_machine_naming_the_folder_and_writes_nothing(rig_file, tmp_path, output):
+    # A Flamenco job type passes a UNC folder through (a Windows Worker reaches it); a Linux Worker must fail the
+    # task instead of baking into a folder of its own disk named like the share and reporting success.
+    work = tmp_path / "work"
+    work.mkdir()
+    run = subprocess.run([sys.executable, str(BAKE), "--blend", str(rig_file), "--frames", "2", "--output", output],
+                         capture_output=True, text=True, timeout=300, cwd=work)
+    assert run.returncode == 1 and repr(output) in run.stderr and "Windows path" in run.stderr, run.stderr
+    assert list(work.iterdir()) == []
+
+
+def test_paths_of_the_other_platform_are_refused_on_each_platform():
+    from skin_detach_addon.blender.baking import check_reachable
+    from skin_detach_addon.core.errors import SkinDetachError
+    for path in ("/mnt/render/q_####.obj", "out/q.obj", "q.ply"):
+        check_reachable("--output", path, platform="posix")
+    for path in (r"\\server\share\q.obj", r"C:\bake\q.obj", "d:/q.obj", r"out\q.obj"):
+        with pytest.raises(SkinDetachError, match="--output: expected a folder this machine can reach"):
+            check_reachable("--output", path, platform="posix")
+    for path in (r"\\server\share\q.obj", "//server/share/q.obj", r"C:\bake\q.obj", "out/q.obj"):
+        check_reachable("--output", path, platform="nt")
+    with pytest.raises(SkinDetachError, match="a POSIX path"):
+        check_reachable("--output", "/mnt/render/q.obj", platform="nt")

@@ -72,3 +72,28 @@ def test_the_bake_cli_takes_blenders_and_openjds_range_syntax(text, frames):
     from skin_detach_addon.blender.baking import parse_frames
     assert parse_frames(text) == frames
 
+
+
+def test_a_unc_output_folder_compiles_and_fails_the_task_on_a_linux_worker_naming_the_folder(scene, tmp_path):
+    # The Manager cannot know which platform a Worker runs, so the job type accepts a UNC folder; the task's own
+    # bake refuses it on a Worker that cannot reach it (exit 1: Flamenco fails the task) and writes nothing.
+    pytest.importorskip("bpy")
+    import bpy
+    import sys
+    from test_blender_api import scripted_rig
+    obj, _ = scripted_rig()
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "shot.blend"))
+    settings = {"frames": "1-2", "chunk_size": 10, "object": obj.name, "output_folder": "\\\\server\\share\\bake",
+                "format": ".obj", "apply_modifiers": False, "preserve_volume": True, "blendfile": "/shots/shot.blend"}
+    compiled = subprocess.run([NODE, str(ROOT / "tests" / "farm" / "flamenco_stand_in.js"),
+                               str(ROOT / "farm" / "flamenco" / "skin_detach_bake.js"), json.dumps(settings)],
+                              capture_output=True, text=True, timeout=60)
+    assert compiled.returncode == 0, compiled.stderr
+    args = json.loads(compiled.stdout)[0]["commands"][0]["parameters"]["args"]
+    task = args[args.index("--") + 1:]
+    work = tmp_path / "worker"
+    work.mkdir()
+    run = subprocess.run([sys.executable, str(ROOT / "scripts" / "bake.py"), "--blend", str(tmp_path / "shot.blend"),
+                          *task], capture_output=True, text=True, timeout=300, cwd=work)
+    assert run.returncode == 1 and "\\\\\\\\server\\\\share\\\\bake" in run.stderr, run.stderr
+    assert list(work.iterdir()) == []

@@ -134,9 +134,33 @@ def check_output(pattern):
     check_folder("path", pattern)
 
 
+#: A path written for Windows: a drive letter, or any backslash (a UNC share starts with two).
+WINDOWS_PATH = re.compile(r"^[A-Za-z]:([\\/]|$)|\\")
+
+
+def check_reachable(argument, path, platform=os.name):
+    """Raise if ``path`` is written for another platform's file system than ``platform``
+    (``os.name``): on Linux and macOS a UNC share (``\\\\server\\share``), a drive letter or a
+    backslash would only name a folder of this machine's own disk (a farm Worker would bake there
+    and report success); on Windows a POSIX absolute path (``/mnt/render``) names a folder on the
+    current drive. ``argument`` names the path in the message."""
+    text = os.fspath(path)
+    if platform == "nt":
+        foreign = text.startswith("/") and not text.startswith("//")
+        kind = "a POSIX path (on Windows it would be a folder of the current drive)"
+    else:
+        foreign = WINDOWS_PATH.search(text) is not None
+        kind = "a Windows path (here it would be a folder of this machine's own disk)"
+    if foreign:
+        raise SkinDetachError(f"{argument}: expected a folder this machine can reach, got {text!r}, {kind}; "
+                              f"map the share to a path of this system (a farm: a two-way variable)")
+
+
 def check_folder(argument, path):
-    """Raise unless the folder of file ``path`` exists (or can be made) and is writable, as is
-    ``path`` itself if it exists; ``argument`` names it in the message."""
+    """Raise unless ``path`` is a path of this platform (:func:`check_reachable`) whose folder
+    exists (or can be made) and is writable, as is ``path`` itself if it exists; ``argument``
+    names it in the message."""
+    check_reachable(argument, path)
     folder = os.path.dirname(os.path.abspath(path))
     try:
         os.makedirs(folder, exist_ok=True)
