@@ -5,8 +5,10 @@ PY := $(VENV)/bin/python
 # The second test leg (CI): Blender 5.2 LTS as a module on Python 3.13, in its own environment.
 PYTHON313 ?= $(firstword $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13.*/bin/python3.13) $(shell command -v python3.13 2>/dev/null))
 VENV313 ?= .venv313
+# The oldest Blender the manifest claims (CI): Blender 4.2 LTS as a module on Python 3.11.
+VENV42 ?= .venv42
 
-.PHONY: demo test test313 test-gui docs-pictures bench extension clean
+.PHONY: demo test test313 test42 test-gui docs-pictures bench extension clean
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +20,12 @@ $(VENV313)/.installed: requirements-py313.txt
 	$(PYTHON313) -m venv $(VENV313)
 	$(VENV313)/bin/python -m pip install --quiet --upgrade pip
 	$(VENV313)/bin/python -m pip install --quiet -r requirements-py313.txt
+	touch $@
+
+$(VENV42)/.installed: requirements.txt requirements-bpy42.txt
+	$(PYTHON) -m venv $(VENV42)
+	$(VENV42)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV42)/bin/python -m pip install --quiet -r requirements-bpy42.txt
 	touch $@
 
 demo: $(VENV)/.installed
@@ -34,6 +42,9 @@ test313:
 		$(VENV313)/bin/python -m pytest -q tests; \
 	fi
 
+test42: $(VENV42)/.installed
+	$(VENV42)/bin/python -m pytest -q tests
+
 # Measure the drag and the quality again and rewrite docs/benchmarks.md from their JSON.
 bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_drag.py --json bench/results/drag.json
@@ -44,7 +55,7 @@ extension: $(VENV)/.installed
 	$(PY) scripts/build_extension.py
 
 clean:
-	rm -rf $(VENV) $(VENV313) out build dist .pytest_cache
+	rm -rf $(VENV) $(VENV313) $(VENV42) out build dist .pytest_cache
 
 # The GUI tests in a real Blender window (Debian's blender 5.2.x in a cached chroot made with
 # debootstrap, or the Blender named by BLENDER=): installs the linux-x64 zip with
