@@ -19,12 +19,19 @@ def _edit_mode_with(ui, obj, ids):
     assert obj.mode == 'EDIT', "Tab did not enter Edit Mode"
 
 
-def test_f3_in_edit_mode_finds_add_handle(ui):
+def _rig_in_edit_mode(ui, axis):
+    """The rig, in Edit Mode with the side beyond 0.8 along ``axis`` selected: (obj, side ids,
+    the handles before)."""
     yield from ui.setup()
     obj, _ = rigs.rig(ui)
-    side = np.flatnonzero(rigs.api().rest_positions(obj)[:, 0] > 0.8)
+    side = np.flatnonzero(rigs.api().rest_positions(obj)[:, axis] > 0.8)
     before = set(rigs.api().handles_of(obj))
     yield from _edit_mode_with(ui, obj, side)
+    return obj, side, before
+
+
+def test_f3_in_edit_mode_finds_add_handle(ui):
+    obj, side, before = yield from _rig_in_edit_mode(ui, 0)
     yield from ui.menu_search("add handle", wait=1.5)
     made = set(rigs.api().handles_of(obj)) - before
     assert len(made) == 1, f"F3 'add handle' in Edit Mode made {len(made)} handles"
@@ -32,11 +39,7 @@ def test_f3_in_edit_mode_finds_add_handle(ui):
 
 
 def test_edit_mode_context_menu_has_add_anchor(ui):
-    yield from ui.setup()
-    obj, _ = rigs.rig(ui)
-    side = np.flatnonzero(rigs.api().rest_positions(obj)[:, 1] > 0.8)
-    before = set(rigs.api().handles_of(obj))
-    yield from _edit_mode_with(ui, obj, side)
+    obj, side, before = yield from _rig_in_edit_mode(ui, 1)
     x, y = ui.mouse
     yield from ui.press('RIGHTMOUSE', wait=0.8)
     yield from ui.find_button("bpy.ops.skin_detach.add_anchor", box=(x - 20, y - 700, x + 320, y + 40),
