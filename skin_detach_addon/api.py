@@ -133,13 +133,22 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
         twin_detail = np.unique(mirrored_ids(binding.mirror_map(mirror), detail, mirror))
         if np.array_equal(twin_detail, detail):
             twin_detail = None  # its own mirror image: one symmetric handle
-    current = mesh_io.read_positions(binding.proxy.data).astype(np.float64)
+    if detail is None:  # proxy vertices: the median point of the proxy's
+        rest, current, selected = surface.proxy_vertices, mesh_io.read_positions(binding.proxy.data), proxy_ids
+    else:
+        rest, current, selected = binding.rest, mesh_io.read_positions(obj.data), detail
+    on_plane = mirror if mirror and twin_detail is None else ""  # its own mirror image: on the plane
+    rest_center = handles.median_point(rest, selected, on_plane)
+    now_center = rest_center + handles.median_point(current, selected) - handles.median_point(rest, selected)
     size = skin_rig.handle_size(obj)
-    empty = handles.add(obj, binding.proxy, kind, proxy_ids, surface.proxy_vertices, current, detail_ids=detail,
+    empty = handles.add(obj, binding.proxy, kind, proxy_ids, rest_center, now_center, detail_ids=detail,
                         size=size, group=group or "", mirror=mirror or "")
     if twin_detail is not None:
-        twin = handles.add(obj, binding.proxy, kind, surface.proxy_vertices_for(twin_detail), surface.proxy_vertices,
-                           current, detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
+        reflect = handles.mirror_matrix(mirror)[:3, :3]  # the twin's pivot: this one's, mirrored exactly
+        twin_rest = reflect @ rest_center
+        twin_now = twin_rest + handles.median_point(current, twin_detail) - handles.median_point(rest, twin_detail)
+        twin = handles.add(obj, binding.proxy, kind, surface.proxy_vertices_for(twin_detail), twin_rest, twin_now,
+                           detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
         handles.pair(empty, twin)
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
     return empty
@@ -312,6 +321,43 @@ def handle_group(empty):
     """The vertex group a handle or anchor was made from, or ""."""
     _check_handle(empty)
     return handles.group_of(empty)
+
+
+def stretch(obj):
+    """(n,) float32 how much ``obj``'s mesh stretches against its rest at each vertex, as the last
+    step that stayed wrote it (a confirm, Apply, :func:`deform`, Reset) into its POINT FLOAT
+    attribute ``skin_detach_stretch``: the mean relative change of the edge lengths of the proxy
+    faces the vertex is bound to, under its skin weights (0 at rest and under rigid motion; 0.1:
+    edges about 10 % longer or shorter). Zeros before any step."""
+    obj = _bound(obj)
+    values = mesh_io.read_point_floats(obj.data, mesh_io.STRETCH)
+    return np.zeros(len(obj.data.vertices), dtype=np.float32) if values is None else values
+
+
+def show_stretch(obj, show=True):
+    """Colour ``obj``'s mesh by its :func:`stretch` (blue 0, red 0.25 or more) in a color
+    attribute ``skin_detach_stretch_color`` made the active color, kept up to date by every step
+    that stays, so that Solid shading with Attribute coloring shows a tension map; ``show=False``
+    removes it."""
+    obj = _bound(obj)
+    if show:
+        mesh_io.write_stretch_colors(obj.data, stretch(obj))
+    else:
+        mesh_io.remove_stretch_colors(obj.data)
+    obj.data.update()
+
+
+def stretch_shown(obj):
+    """``obj``'s mesh is coloured by its stretch (:func:`show_stretch`)."""
+    obj = _bound(obj)
+    return obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None
+
+
+def handle_has_old_pivot(empty):
+    """The handle was made by an earlier version: R and S turn it about the centroid of the proxy
+    vertices it holds, not its selection's median point (a Rebuild moves the pivot there)."""
+    _check_handle(empty)
+    return handles.has_old_pivot(empty)
 
 
 def proxy_of(obj):

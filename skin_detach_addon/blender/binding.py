@@ -18,6 +18,7 @@ from ..core.dual_laplacian import DualLaplacian
 from ..core.errors import SkinDetachError
 from ..core.surface import Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
+from ..core.stretch import SkinStretch
 from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
 from . import mesh_io
 
@@ -82,6 +83,14 @@ class Binding:
         #: the first write of the mesh meanwhile (a save settling the preview) keeps the mesh's
         #: snapshot under "mesh" first, for the drag's cancel to restore.
         self.mesh_guard = None
+        self._stretch = None
+
+    def stretch(self, proxy_vertices):
+        """(n,) float32 the detail's stretch against its rest when the proxy is at
+        ``proxy_vertices`` (m, 3) (:class:`.core.stretch.SkinStretch`, made on first use)."""
+        if self._stretch is None:
+            self._stretch = SkinStretch(self.surface)
+        return self._stretch(proxy_vertices)
 
     def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).

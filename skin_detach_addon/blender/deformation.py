@@ -214,9 +214,13 @@ class Deformation:
         guard = self.binding.mesh_guard
         if guard is not None and "mesh" not in guard:
             guard["mesh"] = mesh_io.snapshot(self.obj.data)
+        stretch = self.binding.stretch(proxy_positions) if mark else None
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)
-        if mark:
+        if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it
+            mesh_io.write_point_floats(self.obj.data, mesh_io.STRETCH, stretch)
+            if self.obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None:  # Show Stretch is on
+                mesh_io.write_stretch_colors(self.obj.data, stretch)
             stored.mark_written(self.obj, detail)
         self.show_preview(False)
 

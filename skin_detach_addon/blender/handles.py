@@ -18,6 +18,9 @@ TAG = "_skin_detach_handle"
 MAX_COORDINATE = 1e12
 HANDLE = "HANDLE"
 ANCHOR = "ANCHOR"
+#: Where an empty's rest frame sits: the selection's median point. Empties made by earlier
+#: versions have no "pivot" key: theirs sits at the centroid of the proxy vertices they hold.
+PIVOT = "selection median"
 
 
 def is_handle(obj):
@@ -120,20 +123,21 @@ def _all_objects():
     return bpy.data.objects
 
 
-def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None, size=1.0, group="", mirror=""):
-    """New empty for ``proxy_ids`` (c,), placed at their centroid in ``current_proxy`` (m, 3) local
-    positions; its rest frame is their centroid in ``rest_proxy`` (m, 3), so an empty made on a
-    deformed mesh starts out where the mesh is. ``group``: the vertex group it was made from
-    (for the panel); ``mirror``: the local axis ("X", "Y", "Z") it is symmetric about or mirrored
-    across (see :func:`pair`)."""
+def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, size=1.0, group="", mirror=""):
+    """New empty holding ``proxy_ids`` (c,), placed at ``now_center`` (3,) in the bound object's
+    local space, its rest frame at ``rest_center`` (3,): the selection's median point (the mean
+    of its vertices, Blender's pivot for R and S) now and at rest, so an empty made on a deformed
+    mesh starts out where the mesh is. ``group``: the vertex group it was made from (for the
+    panel); ``mirror``: the local axis ("X", "Y", "Z") it is symmetric about or mirrored across
+    (see :func:`pair`)."""
     import bpy
     if kind not in (HANDLE, ANCHOR):
         raise SkinDetachError(f"kind: expected {HANDLE!r} or {ANCHOR!r}, got {kind!r}")
     ids = np.unique(np.asarray(proxy_ids, dtype=np.int64))
     if ids.size == 0:
         raise SkinDetachError("selection: expected at least one selected vertex, got none")
-    rest_centroid = rest_proxy[ids].mean(axis=0)
-    now_centroid = current_proxy[ids].mean(axis=0)
+    rest_centroid = np.asarray(rest_center, dtype=np.float64)
+    now_centroid = np.asarray(now_center, dtype=np.float64)
     base = f"{obj.name}_{kind.lower()}"
     empty = bpy.data.objects.new(_free_name(base), None)
     empty.empty_display_type = 'SPHERE' if kind == HANDLE else 'CUBE'
@@ -155,11 +159,22 @@ def add(obj, proxy, kind, proxy_ids, rest_proxy, current_proxy, detail_ids=None,
         "rest_local": rest_local.ravel(),
         "group": str(group),
         "mirror": str(mirror),
+        "pivot": PIVOT,
     }
     return empty
 
 
 AXES = ("X", "Y", "Z")
+
+
+def median_point(positions, ids, on_plane=""):
+    """(3,) the median point (Blender's: the mean) of ``positions`` (n, 3) at vertex ids (k,);
+    ``on_plane`` ("X", "Y", "Z" or ""): the selection is its own mirror image across that local
+    axis, so the point is put exactly on the mirror plane."""
+    point = np.asarray(positions[np.asarray(ids, dtype=np.int64)], dtype=np.float64).mean(axis=0)
+    if on_plane:
+        point[AXES.index(on_plane)] = 0.0
+    return point
 
 
 def mirror_matrix(axis):
@@ -317,7 +332,8 @@ def remove(empty):
 
 
 def rebind(empty, proxy, proxy_ids, rest_centroid):
-    """After a Rebuild: new ``proxy_ids`` and rest frame, the empty back at rest on the new proxy."""
+    """After a Rebuild: new ``proxy_ids`` and rest frame at ``rest_centroid`` (3,), the selection's
+    median point at rest, the empty back at rest on the new proxy."""
     empty.parent = proxy
     empty.matrix_parent_inverse = Matrix.Identity(4)
     empty.matrix_basis = Matrix.Translation(rest_centroid.tolist())
@@ -328,6 +344,13 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
     for key, value in (("proxy_ids", np.asarray(proxy_ids, dtype=np.int32)), ("rest_local", rest_local.ravel())):
         del props[key]
         props[key] = value
+    props["pivot"] = PIVOT
+
+
+def has_old_pivot(empty):
+    """The empty was made by an earlier version: its R/S pivot is the centroid of the proxy
+    vertices it holds, not the selection's median point (a Rebuild moves it there)."""
+    return _get(empty, "pivot") != PIVOT and detail_ids_of(empty).size > 0
 
 
 def local_motion(obj, empty):

@@ -111,6 +111,61 @@ def write_positions(mesh, positions):
     _refresh(mesh)
 
 
+#: The POINT FLOAT attribute the detail's stretch against its rest is written to.
+STRETCH = "skin_detach_stretch"
+
+
+def write_point_floats(mesh, name, values):
+    """Write (n,) ``values`` into the POINT FLOAT attribute ``name`` of ``mesh``, made (or
+    remade, if one of another type or domain has the name) when needed."""
+    buffer = np.ascontiguousarray(values, dtype=np.float32)
+    if buffer.shape != (len(mesh.vertices),):
+        raise SkinDetachError(f"values: expected {len(mesh.vertices)} for mesh {mesh.name!r}, got {buffer.shape}")
+    attribute = mesh.attributes.get(name)
+    if attribute is not None and (attribute.data_type != 'FLOAT' or attribute.domain != 'POINT'):
+        mesh.attributes.remove(attribute)
+        attribute = None
+    if attribute is None:
+        attribute = mesh.attributes.new(name, 'FLOAT', 'POINT')
+    attribute.data.foreach_set("value", buffer)
+
+
+#: The color attribute "Show Stretch" paints the stretch into (blue 0, red at STRETCH_FULL or more).
+STRETCH_COLORS = "skin_detach_stretch_color"
+STRETCH_FULL = 0.25
+
+
+def write_stretch_colors(mesh, stretch):
+    """Paint (n,) ``stretch`` into the POINT color attribute :data:`STRETCH_COLORS` (made when
+    missing) and make it the active color (what the viewport's Attribute coloring shows)."""
+    share = np.clip(np.asarray(stretch, dtype=np.float32) / STRETCH_FULL, 0.0, 1.0)
+    colors = np.stack([share, np.full_like(share, 0.15), 1.0 - share, np.ones_like(share)], axis=1)
+    attribute = mesh.color_attributes.get(STRETCH_COLORS)
+    if attribute is None or attribute.domain != 'POINT' or attribute.data_type != 'FLOAT_COLOR':
+        if attribute is not None:
+            mesh.color_attributes.remove(attribute)
+        attribute = mesh.color_attributes.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
+    attribute.data.foreach_set("color", colors.ravel())
+    mesh.color_attributes.active_color = attribute
+
+
+def remove_stretch_colors(mesh):
+    """Remove the :data:`STRETCH_COLORS` attribute, if there is one."""
+    attribute = mesh.color_attributes.get(STRETCH_COLORS)
+    if attribute is not None:
+        mesh.color_attributes.remove(attribute)
+
+
+def read_point_floats(mesh, name):
+    """(n,) float32 values of the POINT FLOAT attribute ``name`` of ``mesh``, or None."""
+    attribute = mesh.attributes.get(name)
+    if attribute is None or attribute.data_type != 'FLOAT' or attribute.domain != 'POINT':
+        return None
+    values = np.empty(len(mesh.vertices), dtype=np.float32)
+    attribute.data.foreach_get("value", values)
+    return values
+
+
 def _refresh(mesh):
     """Normals and bounds are stale after a bulk attribute write: touch one vertex through RNA
     (which tags the mesh) and update."""
@@ -120,7 +175,8 @@ def _refresh(mesh):
 
 
 def snapshot(mesh):
-    """Exact copy of what :func:`write_positions` may change: the positions and every shape key."""
+    """Exact copy of what a step may change: the positions, every shape key (what
+    :func:`write_positions` writes) and the :data:`STRETCH` attribute (None: there was none)."""
     keys = mesh.shape_keys
     blocks = {}
     if keys is not None:
@@ -130,12 +186,16 @@ def snapshot(mesh):
             blocks[block.name] = data
     positions = np.empty(3 * len(mesh.vertices), dtype=np.float32)
     mesh.attributes["position"].data.foreach_get("vector", positions)
-    return positions, blocks
+    return positions, blocks, read_point_floats(mesh, STRETCH)
 
 
 def restore(mesh, saved):
     """Write back a :func:`snapshot`, bit for bit."""
-    positions, blocks = saved
+    positions, blocks, stretch = saved
+    if stretch is not None:
+        write_point_floats(mesh, STRETCH, stretch)
+    elif mesh.attributes.get(STRETCH) is not None:
+        mesh.attributes.remove(mesh.attributes[STRETCH])
     if mesh.shape_keys is not None:
         for block in mesh.shape_keys.key_blocks:
             if block.name in blocks:

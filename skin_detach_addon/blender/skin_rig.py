@@ -128,10 +128,17 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     preview = None if surface.preview is None else _make_preview(obj, surface.preview)
     stored.store(obj, surface, positions, proxy, preview)
     kept = removed = 0
+    centers = {}
     for empty, detail in old:
         if detail is not None and detail.size:
             ids = surface.proxy_vertices_for(detail)
-            handles.rebind(empty, proxy, ids, surface.proxy_vertices[ids].mean(axis=0))
+            twin = handles.twin_of(empty)
+            if twin is not None and twin.name in centers:  # the twin's, mirrored: exact
+                center = handles.mirror_matrix(handles.mirror_of(empty))[:3, :3] @ centers[twin.name]
+            else:
+                center = handles.median_point(positions, detail, handles.mirror_of(empty) if twin is None else "")
+            centers[empty.name] = center
+            handles.rebind(empty, proxy, ids, center)
             kept += 1
         else:
             handles.remove(empty)

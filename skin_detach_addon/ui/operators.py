@@ -324,6 +324,32 @@ class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
         return {'FINISHED'}
 
 
+class SKIN_DETACH_OT_show_stretch(_Operator, bpy.types.Operator):
+    """Colour the mesh by how much it stretches against its rest (blue none, red 25 % or more),
+    updated by every confirm; Solid shading shows it with Attribute coloring. Again to remove"""
+    bl_idname = "skin_detach.show_stretch"
+    bl_label = "Show Stretch"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return bound_owner(context) is not None
+
+    def run(self, context):
+        obj = bound_owner(context)
+        show = not api.stretch_shown(obj)
+        api.show_stretch(obj, show)
+        for area in getattr(context.screen, "areas", ()):
+            for space in area.spaces:
+                if space.type == 'VIEW_3D':
+                    shading = space.shading
+                    if show and shading.type == 'SOLID':
+                        shading.color_type = 'ATTRIBUTE'
+                    elif not show and shading.color_type == 'ATTRIBUTE':
+                        shading.color_type = 'MATERIAL'
+        return {'FINISHED'}
+
+
 CLASSES = (SKIN_DETACH_OT_build, SKIN_DETACH_OT_add_handle, SKIN_DETACH_OT_add_anchor, SKIN_DETACH_OT_remove_handle,
            SKIN_DETACH_OT_select_handle, SKIN_DETACH_OT_apply, SKIN_DETACH_OT_drag, SKIN_DETACH_OT_reset,
-           SKIN_DETACH_OT_clear)
+           SKIN_DETACH_OT_clear, SKIN_DETACH_OT_show_stretch)

@@ -72,6 +72,13 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
                                   icon=icon, depress=empty == context.active_object)
             select.name = empty.name
             row.operator("skin_detach.remove_handle", text="", icon='X').name = empty.name
+            try:
+                old_pivot = api.handle_has_old_pivot(empty)
+            except api.SkinDetachError:
+                old_pivot = False
+            if old_pivot:
+                wrapped_label(box, "made by an earlier version: R and S turn it about the proxy's centre; "
+                                   "Rebuild to turn it about the selection", icon='INFO')
             if empty.name in conflicts:
                 conflict = conflicts[empty.name]
                 wrapped_label(box, f"shares {conflict['shared']} proxy vertices with {conflict['winner']}, "
@@ -88,6 +95,7 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.apply", icon='CHECKMARK')
         row.prop(settings, "live_update", toggle=True, icon='PLAY')
+        box.operator("skin_detach.show_stretch", icon='MOD_SMOOTH', depress=api.stretch_shown(obj))
         row = box.row(align=True)
         row.operator("skin_detach.reset", icon='LOOP_BACK')
         row.operator("skin_detach.clear", icon='TRASH')
