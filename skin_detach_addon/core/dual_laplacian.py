@@ -47,6 +47,7 @@ from .errors import SkinDetachError
 from .geometry import barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, unique_edges, unit_rows
 from .hessian_factor import HessianFactor, LaggedHessian
 from .projected_newton import largest_step, minimise
+from .pulled_energy import STRENGTH, PulledEnergy
 from .rotated_energy import RotatedEnergy
 from .validation import as_points, as_triangles, as_vertex_ids
 from .volume_constraint import VolumeConstraint
@@ -191,7 +192,7 @@ class DualLaplacian:
     """
 
     def __init__(self, proxy_vertices, proxy_faces, constrained_ids, preserve_volume=True, rigidity=None,
-                 method=DEFAULT_METHOD):
+                 method=DEFAULT_METHOD, pulls=(), pull_strength=STRENGTH):
         if method not in METHODS:
             raise SkinDetachError(f"method: expected one of {', '.join(map(repr, METHODS))}, got {method!r}")
         self.method = method
@@ -246,8 +247,11 @@ class DualLaplacian:
         self.matrix = self._assemble(centroid, weights)
         #: "rotated": the factored Hessian preconditioning the Newton steps, made on the first solve.
         self._lagged = None
+        if pulls and method != "rotated":
+            raise SkinDetachError(f"pulls: expected none with method {method!r} (only 'rotated' pulls), got {len(pulls)}")
+        self.n_pulls = len(pulls)
         if method == "rotated":
-            self._setup_rotated(centroid, m)
+            self._setup_rotated(centroid, m, pulls, pull_strength)
         else:
             self._setup_paper(m)
 
@@ -273,11 +277,12 @@ class DualLaplacian:
         self._factor(normal_eq)
         self._a_free_t = self._a_free.T.tocsr()
 
-    def _setup_rotated(self, centroid, m):
+    def _setup_rotated(self, centroid, m, pulls, pull_strength):
         """The stacked operator B (r, m) of every term of the energy: the k dual Laplacian rows,
         the 3k dual-cell spokes (neighbour centroid or ghost minus own centroid) and, weighted by
         sqrt(rigidity), the 2e cotangent-weighted vertex spokes; each row belongs to one rotation
-        group (its face, or the tail vertex of its spoke)."""
+        group (its face, or the tail vertex of its spoke). With ``pulls`` the energy is
+        :class:`.pulled_energy.PulledEnergy`."""
         k = self.faces.shape[0]
         cell = self._q - sp.vstack([centroid] * 3)
         blocks, groups = [self.matrix, cell], [np.arange(k), np.tile(np.arange(k), 3)]
@@ -289,9 +294,9 @@ class DualLaplacian:
             n_groups = k + m
         b = sp.csr_matrix(sp.vstack(blocks))
         self.energy_terms = RotatedEnergy(b, np.concatenate(groups), n_groups, self.rest)
-        b_free = b[:, self.free].tocsc()
-        self._gram_fixed = sp.csr_matrix(b_free.T @ b[:, self.fixed])
-        self._factor(b_free.T @ b_free)
+        if pulls:
+            self.energy_terms = PulledEnergy(self.energy_terms, pulls, self.rest, pull_strength)
+        self._factor(self.energy_terms.gram[self.free][:, self.free])
 
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
@@ -367,8 +372,11 @@ class DualLaplacian:
         out[self.free] = self._lu.solve(np.ascontiguousarray(gradient))
         return out
 
-    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None, idle=False):
-        """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3).
+    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None, idle=False,
+              pull_motions=None):
+        """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3)
+        and the pulls' detail follows ``pull_motions`` (one (4, 4) rigid motion per pull; None:
+        each holds its detail at rest).
 
         Without ``initial`` the solve starts from rest (the same constraints give the same shape
         whatever was solved before); ``initial`` (m, 3), e.g. the extrapolated previous moves of a
@@ -394,6 +402,9 @@ class DualLaplacian:
         if budget_ms is not None and (isinstance(budget_ms, bool) or not isinstance(budget_ms, (int, float, np.number))
                                       or not budget_ms > 0):
             raise SkinDetachError(f"budget_ms: expected None or a number of milliseconds > 0, got {budget_ms!r}")
+        motions = [np.eye(4)] * self.n_pulls if pull_motions is None else list(pull_motions)
+        if len(motions) != self.n_pulls:
+            raise SkinDetachError(f"pull_motions: expected {self.n_pulls} (4, 4) motions, got {len(motions)}")
         fixed_points = self.rest[self.fixed].copy()
         fixed_points[self._held_in_fixed] = targets
         start = points[self.fixed].copy()
@@ -408,7 +419,7 @@ class DualLaplacian:
                 self._lagged.reset()
             deadline = None if budget_ms is None else begun + budget_ms / 1000.0
             return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline,
-                                          bool(idle) and initial is not None)
+                                          bool(idle) and initial is not None, motions)
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -463,11 +474,13 @@ class DualLaplacian:
         """K^-1 over the free vertices for ``values`` (f, j)."""
         return self._lu.solve(np.ascontiguousarray(values))
 
-    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline, refresh):
+    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline, refresh, motions):
         """Where the constrained vertices jump far from ``start`` (their positions in the initial
         guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
         solved loosely from the last (continuation), so a start from rest lands on the minimum a
-        drag along the way would reach, not on a fold the first step happened to fall into."""
+        drag along the way would reach, not on a fold the first step happened to fall into. The
+        stages start from rest, so the pulls' ``motions`` are staged from the identity alike."""
+        pulled = self.n_pulls > 0
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         if jump > WARM_LIMIT:
             # Too far for the guess to say which stationary point is meant: start from rest, so the
@@ -479,6 +492,8 @@ class DualLaplacian:
         volume = self.volume if self.volume.size else None
         for stage in range(1, stages):
             points[self.fixed] = start + (stage / stages) * (fixed_points - start)
+            if pulled:
+                self.energy_terms.set_motions([np.eye(4) + (stage / stages) * (motion - np.eye(4)) for motion in motions])
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
                               STAGE_TOL, max_iter, deadline, self._lagged, refresh)
             points = staged.points
@@ -489,6 +504,8 @@ class DualLaplacian:
                 return DualLaplacianResult(points, staged.iterations, False, self.volume_change(points),
                                            staged.history, staged.energy)
         points[self.fixed] = fixed_points
+        if pulled:
+            self.energy_terms.set_motions(motions)
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
                           max_iter, deadline, self._lagged, refresh)
         return DualLaplacianResult(result.points, result.iterations, result.converged,

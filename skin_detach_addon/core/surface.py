@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
@@ -161,6 +162,16 @@ class SkinDetachedSurface:
             self._rebuilds[key] = Rebuild(rebuild_matrix(skin, self.proxy_faces, self.proxy_vertices.shape[0],
                                                          self.weld), self.proxy_vertices, self.proxy_faces)
         return self._rebuilds[key]
+
+    def drop_rows(self, ids, groups=None):
+        """(k, m) CSR: row r the drop point of detail vertex ``ids[r]`` (k,) in a rebuild with
+        the rigid ``groups`` (m,) (see :meth:`reconstruct`): the proxy-vertex part of its rebuild
+        row, which sums to 1 (what :class:`.pulled_energy.PulledEnergy` pulls)."""
+        ids = as_vertex_ids("ids", ids, self.n_detail)
+        seams = self._seam_weights()
+        skin = seams.skin(seams.kept(None if groups is None else np.asarray(groups, dtype=np.int64)))
+        m = self.proxy_vertices.shape[0]
+        return sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
 
     @property
     def n_detail(self):

@@ -1,0 +1,147 @@
+"""Handles that hold their selected detail: the proxy held only where the selection owns it, the
+selection's border pulled towards the handle's motion, the detail put exactly on its targets."""
+
+import numpy as np
+import pytest
+
+from conftest import diagonal
+from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
+from skin_detach_addon.core.detail_fit import DetailFit
+from skin_detach_addon.core.held_detail import held_proxy_vertices, proxy_ownership
+from shapes import cylinder, random_rotation
+
+
+def _motion(rotation, shift, pivot):
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = pivot - rotation @ pivot + shift
+    return out
+
+
+def _moved(motion, points):
+    return points @ motion[:3, :3].T + motion[:3, 3]
+
+
+@pytest.fixture(scope="module")
+def rod():
+    """A closed cylinder along z (length 8), its bound surface, anchors on the lowest 15 %, a handle
+    on the highest 15 % of the detail."""
+    points, tris = cylinder(radius=0.5, length=8.0, around=24, along=48)
+    surface = SkinDetachedSurface.build(points, tris, target_faces=300)
+    surface.attach_topology(tris)
+    z = points[:, 2]
+    anchors = np.flatnonzero(z <= z.min() + 0.15 * np.ptp(z))
+    handle = np.flatnonzero(z >= z.max() - 0.15 * np.ptp(z))
+    return points, tris, surface, anchors, handle
+
+
+def _rig(surface, anchors, handle, motion, strength=0.3):
+    rest = surface.proxy_vertices
+    held_handle = held_proxy_vertices(surface, handle)
+    held_anchors = np.setdiff1d(held_proxy_vertices(surface, anchors), held_handle)
+    ids = np.concatenate([held_anchors, held_handle])
+    order = np.argsort(ids)
+    targets = np.concatenate([rest[held_anchors], _moved(motion, rest[held_handle])])[order]
+    groups = np.full(rest.shape[0], -1, dtype=np.int64)
+    groups[held_anchors], groups[held_handle] = 0, 1
+    pulls = [surface.drop_rows(anchors, groups), surface.drop_rows(handle, groups)]
+    solver = DualLaplacian(rest, surface.proxy_faces, ids[order], pulls=pulls, pull_strength=strength)
+    return solver, targets, groups
+
+
+def test_a_handle_holds_fewer_proxy_vertices_than_its_faces_have_corners(rod):
+    _, _, surface, anchors, handle = rod
+    held = held_proxy_vertices(surface, handle)
+    share = proxy_ownership(surface, handle)
+    assert held.size >= 3 and held.size < surface.proxy_vertices_for(handle).size
+    assert np.all(share[held] >= 0.9) and share.max() <= 1.0 + 1e-12 and share.min() >= 0.0
+    # A selection smaller than a proxy face owns no vertex: it holds every corner it binds to.
+    one = handle[:1]
+    assert np.array_equal(held_proxy_vertices(surface, one), surface.proxy_vertices_for(one))
+
+
+def test_drop_rows_sum_to_one(rod):
+    _, _, surface, anchors, handle = rod
+    rows = surface.drop_rows(handle)
+    assert rows.shape == (handle.size, surface.proxy_vertices.shape[0])
+    assert np.allclose(np.asarray(rows.sum(axis=1)).ravel(), 1.0, atol=1e-12)
+
+
+def test_rest_in_rest_out_and_a_rigid_motion_of_everything_is_followed(rod):
+    points, _, surface, anchors, handle = rod
+    rest = surface.proxy_vertices
+    solver, targets, _ = _rig(surface, anchors, handle, np.eye(4))
+    still = solver.solve(targets, max_iter=100, tol=1e-14, pull_motions=[np.eye(4), np.eye(4)])
+    assert np.abs(still.vertices - rest).max() <= 1e-9 * diagonal(points)
+    motion = _motion(random_rotation(3), np.array([0.3, -1.0, 2.0]), np.zeros(3))
+    moved = solver.solve(_moved(motion, rest[solver.constrained]), max_iter=200, tol=1e-14, pull_motions=[motion, motion])
+    assert moved.converged
+    assert np.abs(moved.vertices - _moved(motion, rest)).max() <= 1e-6 * diagonal(points)
+
+
+def test_the_pull_bends_less_of_the_proxy_and_energy_never_rises(rod):
+    points, _, surface, anchors, handle = rod
+    turn = np.array([[np.cos(0.8), 0, np.sin(0.8)], [0, 1, 0], [-np.sin(0.8), 0, np.cos(0.8)]])
+    motion = _motion(turn, np.array([1.5, 0, 0]), points[handle].mean(axis=0))
+    solver, targets, groups = _rig(surface, anchors, handle, motion)
+    result = solver.solve(targets, max_iter=300, tol=1e-12, pull_motions=[np.eye(4), motion])
+    assert result.converged
+    assert np.all(np.diff(result.energy) <= 1e-12 * max(result.energy[0], 1.0))
+    detail = surface.reconstruct(result.vertices, groups=groups)
+    miss = np.linalg.norm(detail[handle] - _moved(motion, points[handle]), axis=1) / diagonal(points)
+    # A weaker pull lets the border miss more: the pull is what brings it there.
+    loose, loose_targets, _ = _rig(surface, anchors, handle, motion, strength=1e-3)
+    free = surface.reconstruct(loose.solve(loose_targets, max_iter=300, tol=1e-12,
+                                           pull_motions=[np.eye(4), motion]).vertices, groups=groups)
+    loose_miss = np.linalg.norm(free[handle] - _moved(motion, points[handle]), axis=1) / diagonal(points)
+    assert miss.mean() < 0.5 * loose_miss.mean() and miss.max() < loose_miss.max()
+
+
+def test_the_detail_fit_puts_held_vertices_on_target_and_blends_only_its_band(rod):
+    points, tris, surface, anchors, handle = rod
+    held = np.concatenate([anchors, handle])
+    fit = DetailFit(surface, points, held)
+    assert fit.band_size > 0
+    detail = points.copy()
+    targets = points[fit.ids] + np.array([0.0, 0.0, 0.01])
+    fit.apply(detail, targets)
+    assert np.array_equal(detail[fit.ids], targets)
+    moved = np.flatnonzero(np.abs(detail - points).max(axis=1) > 0)
+    assert np.setdiff1d(moved, fit.ids).size > 0  # the band follows ...
+    middle = np.abs(points[:, 2] - np.median(points[:, 2])) < 0.5
+    assert np.abs(detail[middle] - points[middle]).max() == 0.0  # ... and the middle does not
+    # The blend is a convex combination of the held differences: never beyond them.
+    assert (detail - points)[:, 2].max() <= 0.01 + 1e-12 and (detail - points)[:, 2].min() >= -1e-12
+    with pytest.raises(SkinDetachError, match="targets"):
+        fit.apply(detail, targets[:-1])
+
+
+def test_pulls_are_checked_where_they_enter(rod):
+    _, _, surface, anchors, handle = rod
+    rest = surface.proxy_vertices
+    with pytest.raises(SkinDetachError, match="pulls"):
+        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)[:, :-1]])
+    with pytest.raises(SkinDetachError, match="pulls"):
+        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)], method="paper")
+    solver = DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)])
+    with pytest.raises(SkinDetachError, match="pull_motions"):
+        solver.solve(rest[:3], pull_motions=[np.eye(4), np.eye(4)])
+    with pytest.raises(SkinDetachError, match="pull_motions"):
+        solver.solve(rest[:3], pull_motions=[np.full((4, 4), np.nan)])
+
+
+def test_the_pulled_energy_derivatives_match_finite_differences(rod):
+    points, _, surface, anchors, handle = rod
+    solver, _, _ = _rig(surface, anchors, handle, np.eye(4))
+    energy = solver.energy_terms
+    energy.set_motions([np.eye(4), _motion(random_rotation(2), np.array([0.2, 0.1, 0.0]), np.zeros(3))])
+    rng = np.random.default_rng(4)
+    rest = surface.proxy_vertices
+    x = rest + 0.02 * diagonal(rest) * rng.standard_normal(rest.shape)
+    direction, h = rng.standard_normal(rest.shape), 1e-6
+    state = energy.at(x)
+    slope = (energy.at(x + h * direction).energy - energy.at(x - h * direction).energy) / (2 * h)
+    assert np.isclose(slope, np.sum(state.gradient * direction), rtol=1e-6)
+    curvature = (energy.at(x + h * direction).gradient - energy.at(x - h * direction).gradient) / (2 * h)
+    product = energy.hessian_product(state, direction)
+    assert np.abs(curvature - product).max() <= 1e-6 * np.abs(product).max()
