@@ -42,7 +42,8 @@ class BendScenario:
 
     def proxy_constraints(self, surface):
         """For a scenario over the detail vertices of ``surface`` (a SkinDetachedSurface): the
-        constrained proxy ids (c,) (anchors first, then the handle) and their targets (c, 3)."""
+        constrained proxy ids (c,) (anchors first, then the handle) and their targets (c, 3),
+        every corner of every proxy face the selections bind to held (handles before 0.2)."""
         handle = surface.proxy_vertices_for(self.handle_ids)
         anchors = np.setdiff1d(surface.proxy_vertices_for(self.anchor_ids), handle)
         rest = surface.proxy_vertices
@@ -58,6 +59,25 @@ class BendScenario:
         groups[ids] = 0
         groups[handle] = 1
         return groups
+
+    def held_rig(self, surface):
+        """The scenario as the add-on rigs it (:mod:`skin_detach_addon.core.held_detail`): a dict
+        with the held proxy ids (c,) sorted, their targets (c, 3), ``groups`` (m,), the
+        ``layout`` (Layout: the anchors' and the handle's detail held), ``pulls`` (two (s, m)
+        drop-row matrices for DualLaplacian) and ``motions`` (identity, the handle's motion)."""
+        from skin_detach_addon.core.held_detail import Layout, held_proxy_vertices
+
+        handle = held_proxy_vertices(surface, self.handle_ids)
+        anchors = np.setdiff1d(held_proxy_vertices(surface, self.anchor_ids), handle)
+        rest = surface.proxy_vertices
+        groups = np.full(rest.shape[0], -1, dtype=np.int64)
+        groups[anchors], groups[handle] = 0, 1
+        ids = np.flatnonzero(groups >= 0)
+        targets = np.where((groups[ids] == 1)[:, None], self.move(rest[ids]), rest[ids])
+        layout = Layout(groups, [(0, self.anchor_ids), (1, self.handle_ids)])
+        pulls = [surface.drop_rows(detail, groups) for _, detail in layout.held]
+        return dict(ids=ids, targets=targets, groups=groups, layout=layout, pulls=pulls,
+                    motions=[np.eye(4), self.motion()])
 
 
 def bend_scenario(points, angle_degrees=45.0, shift_fraction=0.25, band=0.10):

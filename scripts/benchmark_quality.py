@@ -37,6 +37,7 @@ from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
 from skin_detach_addon.core.seam_weights import SEAM_STEPS
+from skin_detach_addon.core.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka"
 
@@ -82,15 +83,32 @@ def bend_rows(name, faces, at_least):
     diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
     closed = is_closed(triangles)
     rows = []
-    for method, steps in (("rotated", SEAM_STEPS), ("rotated, skin as bound", 0), ("paper", SEAM_STEPS)):
-        solver = DualLaplacian(surface.proxy_vertices, surface.proxy_faces, ids, method=method.split(",")[0])
-        start = time.perf_counter()
-        result = solver.solve(targets, max_iter=500, tol=1e-12)
-        settle = time.perf_counter() - start
+    surface.attach_topology(triangles)
+    rig = scenario.held_rig(surface)
+    stretch = SkinStretch(surface)
+    for method, steps in (("rotated", SEAM_STEPS), ("rotated, every corner held", SEAM_STEPS),
+                          ("rotated, skin as bound", 0), ("paper", SEAM_STEPS)):
         surface.seam_steps = steps
-        detail = surface.reconstruct(result.vertices, groups=scenario.proxy_groups(surface))
+        held = method == "rotated"
+        solver = DualLaplacian(surface.proxy_vertices, surface.proxy_faces, rig["ids"] if held else ids,
+                               method=method.split(",")[0], pulls=rig["pulls"] if held else ())
+        start = time.perf_counter()
+        result = solver.solve(rig["targets"] if held else targets, max_iter=500, tol=1e-12,
+                              pull_motions=rig["motions"] if held else None)
+        settle = time.perf_counter() - start
+        layout = dict(groups=rig["groups"], held=rig["layout"].held) if held else \
+            dict(groups=scenario.proxy_groups(surface))
+        surface.reconstruct(result.vertices, **layout)  # the layout's first rebuild prepares its matrix
+        start = time.perf_counter()
+        detail = surface.reconstruct(result.vertices, **layout)
+        rebuild = time.perf_counter() - start
+        start = time.perf_counter()
+        stretched = stretch(result.vertices)
+        stretch_s = time.perf_counter() - start
         rows.append(quality_row(name, method, points, detail, triangles, scenario, diag, closed, surface,
-                                converged=result.converged, settle_ms=1000 * settle))
+                                converged=result.converged, settle_ms=1000 * settle,
+                                stretch_mean=float(stretched.mean()), stretch_max=float(stretched.max()),
+                                stretch_pct_of_step=100 * stretch_s / (settle + rebuild + stretch_s)))
     stack = blender_stack_pose(points, triangles, scenario, int(surface.proxy_faces.shape[0]))
     if stack is not None:
         rows.append(quality_row(name, "Blender stack", points, stack, triangles, scenario, diag, closed, surface))
@@ -162,12 +180,14 @@ def main():
                   flush=True)
     print(f"\n## Bend scenario, proxy target {args.faces} faces\n")
     print("| mesh | vertices | method | edge distortion | dihedral change deg | creases (> 30 deg) | on proxy seams "
-          "| handle error % diag | volume change % | converged | settle ms |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| handle error % diag | volume change % | converged | settle ms | stretch mean / max | stretch % of a step |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in [n for n in args.meshes.split(",") if n]:
         for row in bend_rows(name, args.faces, args.at_least):
             figures["bend"].append(row)
             settle = f"{row['converged']} | {row['settle_ms']:.0f}" if "settle_ms" in row else "- | -"
+            settle += (f" | {row['stretch_mean']:.3f} / {row['stretch_max']:.3f} | {row['stretch_pct_of_step']:.1f}"
+                       if "stretch_mean" in row else " | - | -")
             print(f"| {name} | {row['vertices']:,} | {row['method']} | {row['edge_distortion']:.3f} | "
                   f"{row['dihedral_change_deg']:.2f} | {row['creases']} | {100 * row['creases_on_seams']:.0f} % | "
                   f"{row['handle_error_pct_diag']:.2e} | {row['volume_change_pct']:+.2f} | {settle} |", flush=True)

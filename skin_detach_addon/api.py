@@ -27,6 +27,7 @@ from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession, mov
 from .blender.skin_rig import PREVIEW_ABOVE
 from .core import threads
 from .core.errors import SkinDetachError
+from .core.held_detail import held_proxy_vertices
 from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
@@ -127,7 +128,7 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
         detail = None
     else:
         detail = np.unique(as_vertex_ids("vertex_ids", vertex_ids, surface.n_detail))
-        proxy_ids = surface.proxy_vertices_for(detail)
+        proxy_ids = held_proxy_vertices(surface, detail)
     twin_detail = None
     if mirror:
         twin_detail = np.unique(mirrored_ids(binding.mirror_map(mirror), detail, mirror))
@@ -147,7 +148,7 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
         reflect = handles.mirror_matrix(mirror)[:3, :3]  # the twin's pivot: this one's, mirrored exactly
         twin_rest = reflect @ rest_center
         twin_now = twin_rest + handles.median_point(current, twin_detail) - handles.median_point(rest, twin_detail)
-        twin = handles.add(obj, binding.proxy, kind, surface.proxy_vertices_for(twin_detail), twin_rest, twin_now,
+        twin = handles.add(obj, binding.proxy, kind, held_proxy_vertices(surface, twin_detail), twin_rest, twin_now,
                            detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
         handles.pair(empty, twin)
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns

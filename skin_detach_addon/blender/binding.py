@@ -92,23 +92,29 @@ class Binding:
             self._stretch = SkinStretch(self.surface)
         return self._stretch(proxy_vertices)
 
-    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False):
-        """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3).
-        One :class:`DualLaplacian` is factored per set of ids (the last few are kept). With
+    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False, layout=None,
+                    motions=()):
+        """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3),
+        the held detail of ``layout`` (a :class:`.core.held_detail.Layout`) pulled along
+        ``motions`` (one (4, 4) per pair of ``layout.held``).
+        One :class:`DualLaplacian` is factored per set of ids and layout (the last few are kept). With
         ``follow`` the solve starts from :func:`follow_start` of the last two solutions of the
         same set, as a drag does, and stops after ``budget_ms`` (None: no limit; ``idle``: see
         :meth:`DualLaplacian.solve`); without it from rest, so the same handles give the same
         shape whatever was solved before (Apply, bake)."""
-        key = (ids.tobytes(), bool(preserve_volume))
+        key = (ids.tobytes(), bool(preserve_volume), None if layout is None else layout.key())
         if key not in self._solvers:
             if len(self._solvers) >= 8:
                 self._solvers.pop(next(iter(self._solvers)))
+            pulls = [] if layout is None else [self.surface.drop_rows(detail, layout.groups)
+                                               for _, detail in layout.held]
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
-                                                preserve_volume=preserve_volume), []]
+                                                preserve_volume=preserve_volume, pulls=pulls), []]
         solver, recent = self._solvers[key]
         initial = follow_start(recent, ids, targets) if follow else None
         result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
-                              budget_ms=budget_ms if follow else None, idle=idle and follow)
+                              budget_ms=budget_ms if follow else None, idle=idle and follow,
+                              pull_motions=list(motions) if solver.n_pulls else None)
         self._solvers[key][1] = [result] + recent[:1]
         return result
 
@@ -134,11 +140,14 @@ class Binding:
         for entry in self._solvers.values():
             entry[1] = []
 
-    def rebuild(self, proxy_vertices, groups=None):
-        """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``groups``: their
-        rigid groups, see :meth:`SkinDetachedSurface.reconstruct`), in a reused buffer (copy it
-        to keep it past the next call)."""
-        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=groups)
+    def rebuild(self, proxy_vertices, layout=None):
+        """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``layout``: their
+        rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), in a reused
+        buffer (copy it to keep it past the next call)."""
+        if layout is None:
+            return self.surface.reconstruct(proxy_vertices, out=self._buffer)
+        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
+                                        held=layout.held or None)
 
     def rebuild_preview(self, proxy_vertices, groups=None):
         """(c, 3) float32 preview positions from deformed proxy vertices (m, 3), in a reused buffer."""

@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
+from ..core.held_detail import Layout
 from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handles, mesh_io
@@ -94,7 +95,7 @@ class Deformation:
         return handles.handles_of(self.obj, self.proxy)
 
     def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
-        """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, rigid groups (m,)) from the
+        """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`) from the
         handles' transforms (``follow``, ``budget_ms``, ``idle``: see
         :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
@@ -105,18 +106,20 @@ class Deformation:
         self.kept_symmetric = handles.keep_symmetric(self.obj, empties, axis) if axis and asked else []
         if axis and not asked and not handles.moves_symmetrically(self.obj, empties, axis):
             axis = ""
-        ids, targets, groups = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle)
-        #: The last solve's (symmetry axis, result, groups): what :meth:`commit` rebuilds from.
-        self.solved = (axis, result, groups)
-        return axis, result, groups
+        layout = Layout(groups, [(label, ids_) for label, ids_, _ in detail])
+        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
+                                          layout, [motion for _, _, motion in detail])
+        #: The last solve's (symmetry axis, result, layout): what :meth:`commit` rebuilds from.
+        self.solved = (axis, result, layout)
+        return axis, result, layout
 
-    def _rebuild(self, axis, result, groups):
+    def _rebuild(self, axis, result, layout):
         """The detail of a solve."""
-        detail = self.binding.rebuild(result.vertices, groups)
+        detail = self.binding.rebuild(result.vertices, layout)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return detail
@@ -126,8 +129,8 @@ class Deformation:
         last solves, within ``budget_ms``) and rebuild without writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        axis, result, groups = self._solve_proxy(tol, follow, budget_ms, idle)
-        return result, self._rebuild(axis, result, groups)
+        axis, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
+        return result, self._rebuild(axis, result, layout)
 
     def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, idle=False):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
@@ -141,8 +144,8 @@ class Deformation:
         """Write the full detail rebuilt from the last solve (no new solve: what a drag showed,
         settled, is what is kept), the proxy, and the written digest; a :class:`StepReport`."""
         start = time.perf_counter()
-        axis, result, groups = self.solved
-        return self._report(start, result, self._rebuild(axis, result, groups), True)
+        axis, result, layout = self.solved
+        return self._report(start, result, self._rebuild(axis, result, layout), True)
 
     def _report(self, start, result, detail, mark, settling=False):
         """Write, and record the step's figures on the binding (``settling``: a budgeted step of a
@@ -167,8 +170,8 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, groups = self._solve_proxy(tol, follow, budget_ms, idle)
-        positions = self.binding.rebuild_preview(result.vertices, groups)
+        _, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
+        positions = self.binding.rebuild_preview(result.vertices, layout.groups)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)
         mesh_io.write_positions(self.proxy.data, result.vertices)

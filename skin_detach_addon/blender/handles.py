@@ -365,14 +365,17 @@ def local_motion(obj, empty):
 
 
 def constraints(obj, empties, rest_proxy):
-    """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, and the rigid group
-    of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), from the handle
-    and anchor ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later
-    handle overrides an older one."""
+    """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, the rigid group
+    of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), and the held
+    detail: (group label, detail ids (h,), (4, 4) local motion) per group made from detail
+    vertices (the anchors' together, motion the identity), from the handle and anchor
+    ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later handle
+    overrides an older one."""
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
+    anchored, detail = [], []
     for label, empty in enumerate(sorted(empties, key=lambda e: kind_of(e) == HANDLE), start=1):
         ids = proxy_ids_of(empty, m)
         if ids.size == 0:
@@ -387,9 +390,15 @@ def constraints(obj, empties, rest_proxy):
                                       f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
             targets[ids] = moved
             groups[ids] = label
+            if detail_ids_of(empty).size:
+                detail.append((label, detail_ids_of(empty), motion))
         else:
             targets[ids] = rest_proxy[ids]
             groups[ids] = 0
+            anchored.append(detail_ids_of(empty))
         held[ids] = True
+    anchored = np.unique(np.concatenate(anchored)) if anchored else np.zeros(0, dtype=np.int64)
+    if anchored.size:
+        detail.insert(0, (0, anchored, np.eye(4)))
     ids = np.flatnonzero(held)
-    return ids, targets[ids], groups
+    return ids, targets[ids], groups, detail

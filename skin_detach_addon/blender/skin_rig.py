@@ -7,6 +7,7 @@ from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
+from ..core.held_detail import held_proxy_vertices
 from ..core.surface import SkinDetachedSurface
 from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
@@ -131,7 +132,7 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     centers = {}
     for empty, detail in old:
         if detail is not None and detail.size:
-            ids = surface.proxy_vertices_for(detail)
+            ids = held_proxy_vertices(surface, detail)
             twin = handles.twin_of(empty)
             if twin is not None and twin.name in centers:  # the twin's, mirrored: exact
                 center = handles.mirror_matrix(handles.mirror_of(empty))[:3, :3] @ centers[twin.name]

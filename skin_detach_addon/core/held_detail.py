@@ -8,11 +8,16 @@ for an armadillo's leg: the proxy bends only outside that, and stretches there. 
 the proxy vertices its selection *owns* (:func:`proxy_ownership` at least :data:`OWNED`: nearly
 all of the skin's weight on them comes from selected vertices); the rest of the selection pulls
 the free proxy around its border towards the handle's motion
-(:class:`.pulled_energy.PulledEnergy`), and :class:`.detail_fit.DetailFit` puts it exactly
-where the handle says.
+(:class:`.pulled_energy.PulledEnergy`), and the rebuild binds every selected vertex to a proxy
+face its handle holds whole (:func:`held_rows`), so it lands exactly where the handle puts it;
+the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
 """
 
+from dataclasses import dataclass
+
 import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from .validation import as_vertex_ids
 
@@ -22,6 +27,22 @@ OWNED = 0.9
 #: corner of the faces it binds to instead, as handles always did: three free corners could not
 #: carry its rotation.
 MIN_OWNED = 3
+
+
+@dataclass
+class Layout:
+    """What a rig holds: ``groups`` (m,) int64 the rigid group of every proxy vertex (-1 free, 0
+    anchors, 1, 2, ... handles) and ``held`` a list of (group label, detail ids (h,)) for the
+    groups made from detail vertices (a later pair overrides an earlier one)."""
+
+    groups: np.ndarray
+    held: list
+
+    def key(self):
+        """Bytes that differ between layouts (a solver and a rebuild are prepared per layout)."""
+        return self.groups.tobytes() + b"".join(int(label).to_bytes(8, "little", signed=True) +
+                                                np.asarray(ids, dtype=np.int64).tobytes() + b"|"
+                                                for label, ids in self.held)
 
 
 def proxy_ownership(surface, ids):
@@ -42,9 +63,37 @@ def proxy_ownership(surface, ids):
 
 def held_proxy_vertices(surface, ids):
     """(c,) sorted proxy vertex ids a handle of detail vertices ``ids`` (k,) holds: those it owns
-    (:func:`proxy_ownership` >= :data:`OWNED`), or, for a selection owning fewer than
-    :data:`MIN_OWNED`, every corner of every face it binds to (``surface.proxy_vertices_for``)."""
-    owned = np.flatnonzero(proxy_ownership(surface, ids) >= OWNED)
-    return owned if owned.size >= MIN_OWNED else surface.proxy_vertices_for(ids)
+    (:func:`proxy_ownership` >= :data:`OWNED`) when they are at least :data:`MIN_OWNED` and make
+    up at least one whole proxy face (its detail is bound there, :func:`held_rows`); else, for a
+    selection about as small as the proxy's faces, every corner of every face it binds to
+    (``surface.proxy_vertices_for``), as handles always held."""
+    owned = np.zeros(surface.proxy_vertices.shape[0], dtype=bool)
+    owned[proxy_ownership(surface, ids) >= OWNED] = True
+    if owned.sum() >= MIN_OWNED and owned[surface.proxy_faces].all(axis=1).any():
+        return np.flatnonzero(owned)
+    return surface.proxy_vertices_for(ids)
 
 
+def held_rows(proxy_vertices, proxy_faces, usable, rest, groups, labels):
+    """Where the rebuild binds held detail: (u, k) CSR, row i weight 1 on the proxy face nearest
+    detail vertex i (rest centroids) among the usable faces whose three corners its group holds.
+
+    ``proxy_vertices`` (m, 3), ``proxy_faces`` (k, 3), ``usable`` (k,) bool (faces with a frame),
+    ``rest`` (u, 3) welded detail at rest, ``groups`` (m,) rigid group of each proxy vertex (-1
+    free), ``labels`` (u,) the group holding each welded detail vertex (-1 none). Rows of vertices
+    with no label, or whose group holds no whole face, are empty. A vertex bound to such a face
+    with its own coefficients over the face's plane moves exactly with the group, however far
+    from it the face is (the group moves rigidly, or scales uniformly)."""
+    u, k = rest.shape[0], proxy_faces.shape[0]
+    corner_groups = groups[proxy_faces]
+    whole = usable & (corner_groups[:, 0] >= 0) & (corner_groups == corner_groups[:, :1]).all(axis=1)
+    centroids = proxy_vertices[proxy_faces].mean(axis=1)
+    face = np.full(u, -1, dtype=np.int64)
+    for group in np.unique(labels[labels >= 0]):
+        candidates = np.flatnonzero(whole & (corner_groups[:, 0] == group))
+        if not candidates.size:
+            continue
+        members = np.flatnonzero(labels == group)
+        face[members] = candidates[cKDTree(centroids[candidates]).query(rest[members])[1]]
+    bound = np.flatnonzero(face >= 0)
+    return sp.csr_matrix((np.ones(bound.size), (bound, face[bound])), shape=(u, k))

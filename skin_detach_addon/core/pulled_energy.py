@@ -29,10 +29,11 @@ import scipy.sparse as sp
 from .errors import SkinDetachError
 
 #: The pull's weight against the energy's own (see the module): lower bends the proxy more
-#: freely and leaves more for :class:`.detail_fit.DetailFit` to close. On the bend scenario over
-#: six meshes, 0.05 / 0.1 / 0.3 gave edge distortion 0.062 / 0.062 / 0.064 on the armadillo and
-#: 1,949 / 1,575 / 1,104 creases in all (full-resolution ARAP: 1,529).
-STRENGTH = 0.3
+#: freely, higher leaves less difference for the skin's diffusion to blend in around the held
+#: detail. Bend scenario, six meshes (docs/benchmarks.md): 1 / 3 gave edge distortion 0.068 /
+#: 0.073 on the armadillo, 0.046 / 0.050 on homer, and 1,324 / 962 creases in all (full-resolution
+#: ARAP 1,529; 1,273 holding every corner).
+STRENGTH = 1.0
 
 
 class PulledEnergy:

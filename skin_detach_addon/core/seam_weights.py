@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .geometry import half_edge_graph
+from .held_detail import held_rows
 from .skin import Skin
 
 #: One-ring averaging steps of the weights: about how many rings of the detail a weight change spans.
@@ -73,13 +74,13 @@ class SeamWeights:
             near = self._average @ near
         return near > 0.0
 
-    def _diffused(self, rows, keep):
+    def _diffused(self, rows, keep, held_rows=None):
         """(len(rows), k) CSR: W diffused over the sub-mesh of ``rows`` (sorted ids) with the
-        ``keep`` (len(rows),) rows held."""
+        ``keep`` (len(rows),) rows held at their own weights or at ``held_rows`` (u, k)."""
         average = self._average[rows][:, rows] if rows.size < self._average.shape[0] else self._average
         base = self._base[rows] if rows.size < self._base.shape[0] else self._base
         free = sp.diags((~keep).astype(np.float64))
-        held = sp.csr_matrix(sp.diags(keep.astype(np.float64)) @ base)
+        held = sp.csr_matrix(sp.diags(keep.astype(np.float64)) @ (base if held_rows is None else held_rows[rows]))
         weights = base
         for _ in range(self.steps):
             weights = free @ (average @ weights) + held
@@ -120,15 +121,29 @@ class SeamWeights:
         np.maximum.at(high, self._skin.vertex, labels.max(axis=1))
         return (low == high) & (low >= 0)
 
-    def skin(self, keep=None):
-        """The diffused :class:`.skin.Skin` with the ``keep`` (u,) rows held (None: none)."""
-        if self.steps <= 0:
+    def held_by(self, groups, labels=None):
+        """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin`: the vertices carried by one
+        rigid group (:meth:`kept`) at their own weights, and the vertices ``labels`` (u,) says a
+        group holds (-1: none) bound to a face that group holds whole (:func:`.held_detail.held_rows`)."""
+        keep = self.kept(groups)
+        if labels is None or groups is None:
+            return keep, None
+        rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest,
+                         np.asarray(groups), np.where(keep, -1, labels))
+        replaced = np.diff(rows.indptr) > 0
+        return keep | replaced, sp.csr_matrix(sp.diags((~replaced).astype(np.float64)) @ self._base + rows)
+
+    def skin(self, keep=None, held_rows=None):
+        """The diffused :class:`.skin.Skin` with the ``keep`` (u,) rows held (None: none), at their
+        own weights or, where given, at ``held_rows`` (u, k) CSR (rows of held vertices are read:
+        a vertex held by a handle whose proxy corners are not all held is bound to faces that are)."""
+        if self.steps <= 0 and held_rows is None:
             return self._skin
         parts = self._free_associations()
         if keep is not None and keep.any():
-            affected = self._within(keep, self.steps)
+            affected = self._within(keep, max(self.steps, 1))
             region = np.flatnonzero(self._within(affected, self.steps))
-            local = self._associations(region, self._diffused(region, keep[region]))
+            local = self._associations(region, self._diffused(region, keep[region], held_rows))
             inside = affected[local[0]]
             outside = ~affected[parts[0]]
             parts = [np.concatenate([a[outside], b[inside]]) for a, b in zip(parts, local)]

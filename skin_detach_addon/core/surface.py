@@ -147,17 +147,31 @@ class SkinDetachedSurface:
             self._seams = SeamWeights(self.skin, self.weld[self.triangles], rest, frames, self._seam_steps)
         return self._seams
 
-    def _rebuild_for(self, groups):
+    def _held_labels(self, held):
+        """(u,) group of each welded detail vertex from ``held`` (pairs (group label, detail ids)),
+        -1 where none; a later pair overrides an earlier one."""
+        labels = np.full(self.skin.case.shape[0], -1, dtype=np.int64)
+        for label, ids in held:
+            labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
+        return labels
+
+    def _layout_skin(self, groups, held):
+        seams = self._seam_weights()
+        keep, rows = seams.held_by(groups, None if held is None else self._held_labels(held))
+        return seams.skin(keep, rows)
+
+    def _rebuild_for(self, groups, held=None):
         """The :class:`.reconstruction.Rebuild` of the diffused skin with the vertices carried by
-        one rigid group held (``groups`` (m,) int64 or None); the last two layouts are kept, keyed
-        by the labels themselves (m values: a drag move looks its matrix up without a pass over
-        the detail)."""
-        key = None if groups is None else groups.tobytes()
+        one rigid group held (``groups`` (m,) int64 or None) and those ``held`` names (pairs
+        (group label, detail ids) or None) bound to faces their group holds; the last two layouts
+        are kept, keyed by the labels and ids themselves (a drag move looks its matrix up without
+        a pass over the detail)."""
+        key = (None if groups is None else groups.tobytes(),
+               None if held is None else tuple((int(label), np.asarray(ids).tobytes()) for label, ids in held))
         if key not in self._rebuilds:
             if len(self._rebuilds) >= 2:
                 self._rebuilds.pop(next(iter(self._rebuilds)))
-            seams = self._seam_weights()
-            skin = seams.skin(seams.kept(groups))
+            skin = self._layout_skin(groups, held)
             check_coefficients(skin, "the diffused skin")
             self._rebuilds[key] = Rebuild(rebuild_matrix(skin, self.proxy_faces, self.proxy_vertices.shape[0],
                                                          self.weld), self.proxy_vertices, self.proxy_faces)
@@ -165,11 +179,11 @@ class SkinDetachedSurface:
 
     def drop_rows(self, ids, groups=None):
         """(k, m) CSR: row r the drop point of detail vertex ``ids[r]`` (k,) in a rebuild with
-        the rigid ``groups`` (m,) (see :meth:`reconstruct`): the proxy-vertex part of its rebuild
-        row, which sums to 1 (what :class:`.pulled_energy.PulledEnergy` pulls)."""
+        the rigid ``groups`` (m,) (see :meth:`reconstruct`, without ``held``: where the rebuild
+        would put them from the proxy alone): the proxy-vertex part of its rebuild row, which sums
+        to 1 (what :class:`.pulled_energy.PulledEnergy` pulls)."""
         ids = as_vertex_ids("ids", ids, self.n_detail)
-        seams = self._seam_weights()
-        skin = seams.skin(seams.kept(None if groups is None else np.asarray(groups, dtype=np.int64)))
+        skin = self._layout_skin(None if groups is None else np.asarray(groups, dtype=np.int64), None)
         m = self.proxy_vertices.shape[0]
         return sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
 
@@ -296,13 +310,16 @@ class SkinDetachedSurface:
         report(1.0, "done")
         return surface
 
-    def reconstruct(self, proxy_vertices, out=None, groups=None):
+    def reconstruct(self, proxy_vertices, out=None, groups=None, held=None):
         """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
         given: an (n, 3) float64 or float32 array (float32 computes in float32). ``groups`` (m,)
         int, optional: label of the rigid group (handle or anchor) each proxy vertex was moved
         with, -1 for none; detail carried by one group then moves exactly with it. The skin's
         weights are diffused over the detail mesh (:mod:`.seam_weights`: no creases where the
-        proxy bends); the first rebuild with a new layout of groups prepares its matrix."""
+        proxy bends); the first rebuild with a new layout of groups prepares its matrix. ``held``
+        (pairs (group label, detail ids (h,)), optional, with ``groups``): detail vertices that
+        move exactly with their group although some proxy corners they bind to are free (a
+        handle's selection: :mod:`.held_detail`); a later pair overrides an earlier one."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
         if groups is not None:
             groups = np.asarray(groups)
@@ -314,7 +331,9 @@ class SkinDetachedSurface:
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        return self._rebuild_for(groups)(points, out=out)
+        if held is not None and groups is None:
+            raise SkinDetachError("held: expected groups (the rigid group of every proxy vertex) with held detail, got none")
+        return self._rebuild_for(groups, None if held is None else [(label, ids) for label, ids in held])(points, out=out)
 
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
