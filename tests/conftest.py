@@ -31,6 +31,17 @@ def diagonal(points):
     return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
 
 
+def check_energy_derivatives(energy, x, direction, h=1e-6):
+    """Assert that ``energy``'s gradient and Hessian product at ``x`` (m, 3) match central
+    differences along ``direction`` (m, 3)."""
+    state = energy.at(x)
+    slope = (energy.at(x + h * direction).energy - energy.at(x - h * direction).energy) / (2 * h)
+    assert np.isclose(slope, np.sum(state.gradient * direction), rtol=1e-6)
+    curvature = (energy.at(x + h * direction).gradient - energy.at(x - h * direction).gradient) / (2 * h)
+    product = energy.hessian_product(state, direction)
+    assert np.abs(curvature - product).max() <= 1e-6 * np.abs(product).max()
+
+
 def pytest_configure(config):
     """Blender reads and may write its user resources: point them at a throw-away folder before
     any test module imports bpy, and remove it when the run ends."""

@@ -4,7 +4,7 @@ selection's border pulled towards the handle's motion, the detail put exactly on
 import numpy as np
 import pytest
 
-from conftest import diagonal
+from conftest import check_energy_derivatives, diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
 from skin_detach_addon.core.held_detail import held_proxy_vertices, proxy_ownership
 from shapes import cylinder, random_rotation
@@ -124,9 +124,4 @@ def test_the_pulled_energy_derivatives_match_finite_differences(rod):
     rest = surface.proxy_vertices
     x = rest + 0.02 * diagonal(rest) * rng.standard_normal(rest.shape)
     direction, h = rng.standard_normal(rest.shape), 1e-6
-    state = energy.at(x)
-    slope = (energy.at(x + h * direction).energy - energy.at(x - h * direction).energy) / (2 * h)
-    assert np.isclose(slope, np.sum(state.gradient * direction), rtol=1e-6)
-    curvature = (energy.at(x + h * direction).gradient - energy.at(x - h * direction).gradient) / (2 * h)
-    product = energy.hessian_product(state, direction)
-    assert np.abs(curvature - product).max() <= 1e-6 * np.abs(product).max()
+    check_energy_derivatives(energy, x, direction, h)

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import diagonal
+from conftest import check_energy_derivatives, diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
 from skin_detach_addon.core.hessian_factor import HessianFactor, LaggedHessian
 from shapes import bend_constraints as bend
@@ -26,12 +26,7 @@ def test_gradient_and_hessian_products_match_finite_differences(spot_proxy):
     x = points + 0.05 * diagonal(points) * rng.standard_normal(points.shape)
     direction = rng.standard_normal(points.shape)
     energy, h = solver.energy_terms, 1e-6
-    state = energy.at(x)
-    slope = (energy.at(x + h * direction).energy - energy.at(x - h * direction).energy) / (2 * h)
-    assert np.isclose(slope, np.sum(state.gradient * direction), rtol=1e-6)
-    curvature = (energy.at(x + h * direction).gradient - energy.at(x - h * direction).gradient) / (2 * h)
-    product = energy.hessian_product(state, direction)
-    assert np.abs(curvature - product).max() <= 1e-6 * np.abs(product).max()
+    check_energy_derivatives(energy, x, direction, h)
     volume = solver.volume
     bend_rate = (volume.gradient(x + h * direction) - volume.gradient(x - h * direction)) / (2 * h)
     weights = np.full(volume.size, 1.0)
