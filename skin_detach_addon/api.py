@@ -18,7 +18,7 @@ the expected and the actual value; nothing is written when it raises.
 
 import numpy as np
 
-from .blender import baking, handles, mesh_io, skin_rig
+from .blender import baking, handle_symmetry, handles, mesh_io, skin_rig
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
@@ -105,10 +105,10 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     obj = _bound(obj)
     binding = stored.open_binding(obj)
     surface = binding.surface
-    if mirror not in (None, "", *handles.AXES):
+    if mirror not in (None, "", *handle_symmetry.AXES):
         raise SkinDetachError(f"mirror: expected None, 'X', 'Y' or 'Z', got {mirror!r}")
     if mirror is None and not on_proxy:  # the mesh's own symmetry setting (Edit Mode's X/Y/Z toggles)
-        toggles = [axis for axis in handles.AXES if getattr(obj.data, f"use_mirror_{axis.lower()}", False)]
+        toggles = [axis for axis in handle_symmetry.AXES if getattr(obj.data, f"use_mirror_{axis.lower()}", False)]
         if len(toggles) > 1:
             raise SkinDetachError(f"mesh {obj.data.name!r}: expected at most one of its X/Y/Z mirror toggles on to make "
                                   f"mirror twins, got {' and '.join(toggles)} (a handle mirrors across one axis); turn "
@@ -139,18 +139,20 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     else:
         rest, current, selected = binding.rest, mesh_io.read_positions(obj.data), detail
     on_plane = mirror if mirror and twin_detail is None else ""  # its own mirror image: on the plane
-    rest_center = handles.median_point(rest, selected, on_plane)
-    now_center = rest_center + handles.median_point(current, selected) - handles.median_point(rest, selected)
+    rest_center = handle_symmetry.median_point(rest, selected, on_plane)
+    now_center = (rest_center + handle_symmetry.median_point(current, selected)
+                  - handle_symmetry.median_point(rest, selected))
     size = skin_rig.handle_size(obj)
     empty = handles.add(obj, binding.proxy, kind, proxy_ids, rest_center, now_center, detail_ids=detail,
                         size=size, group=group or "", mirror=mirror or "")
     if twin_detail is not None:
-        reflect = handles.mirror_matrix(mirror)[:3, :3]  # the twin's pivot: this one's, mirrored exactly
+        reflect = handle_symmetry.mirror_matrix(mirror)[:3, :3]  # the twin's pivot: this one's, mirrored exactly
         twin_rest = reflect @ rest_center
-        twin_now = twin_rest + handles.median_point(current, twin_detail) - handles.median_point(rest, twin_detail)
+        twin_now = (twin_rest + handle_symmetry.median_point(current, twin_detail)
+                    - handle_symmetry.median_point(rest, twin_detail))
         twin = handles.add(obj, binding.proxy, kind, held_proxy_vertices(surface, twin_detail), twin_rest, twin_now,
                            detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
-        handles.pair(empty, twin)
+        handle_symmetry.pair(empty, twin)
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
     return empty
 
@@ -267,13 +269,13 @@ def mirror_twin(empty):
     """The mirror twin of a handle or anchor empty (made with it from the mesh's mirror toggle or
     ``mirror``), or None."""
     _check_handle(empty)
-    return handles.twin_of(empty)
+    return handle_symmetry.twin_of(empty)
 
 
 def handle_mirror(empty):
     """The local axis ("X", "Y", "Z") a handle is mirrored across or symmetric about, or ""."""
     _check_handle(empty)
-    return handles.mirror_of(empty)
+    return handle_symmetry.mirror_of(empty)
 
 
 def handle_vertex_count(empty):

@@ -10,7 +10,7 @@ from blender_support import activate  # noqa: E402
 
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.api import SkinDetachError  # noqa: E402
-from skin_detach_addon.blender import handles  # noqa: E402
+from skin_detach_addon.blender import handle_symmetry, handles  # noqa: E402
 
 
 def monkey():
@@ -189,13 +189,12 @@ def test_numbers_typed_in_the_drag_set_exact_moves_angles_and_factors(scene):
 
 
 def test_a_shift_d_copy_of_a_handle_is_newer_and_is_no_twin(scene):
-    from skin_detach_addon.blender import handles
     obj = monkey()
     api.build(obj, target_faces=300)
     rest = api.rest_positions(obj).astype(np.float64)
     grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")
-    twin = handles.twin_of(grip)
-    assert twin is not None and handles.twin_of(twin) == grip
+    twin = handle_symmetry.twin_of(grip)
+    assert twin is not None and handle_symmetry.twin_of(twin) == grip
     for other in bpy.context.view_layer.objects:
         other.select_set(False)
     grip.select_set(True)
@@ -206,24 +205,23 @@ def test_a_shift_d_copy_of_a_handle_is_newer_and_is_no_twin(scene):
     assert api.handles_of(obj)[-1] == copy                  # the newest: it wins on shared vertices
     conflicts = api.handle_conflicts(obj)
     assert any(c["loser"] == grip.name for c in conflicts)
-    assert handles.twin_of(copy) is None and handles.twin_of(grip) == twin
+    assert handle_symmetry.twin_of(copy) is None and handle_symmetry.twin_of(grip) == twin
 
 
 def test_a_mirror_twin_deleted_in_the_viewport_is_gone(scene):
-    from skin_detach_addon.blender import handles
     obj = monkey()
     api.build(obj, target_faces=300)
     rest = api.rest_positions(obj).astype(np.float64)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
     grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror="X")
-    twin = handles.twin_of(grip)
+    twin = handle_symmetry.twin_of(grip)
     twin_name = twin.name
     for other in bpy.context.view_layer.objects:
         other.select_set(False)
     twin.select_set(True)
     bpy.ops.object.delete()
     assert twin_name not in [e.name for e in api.handles_of(obj)]
-    assert handles.twin_of(grip) is None
+    assert handle_symmetry.twin_of(grip) is None
     assert all(twin_name not in (c["winner"], c["loser"]) for c in api.handle_conflicts(obj))
     grip.location.z += 0.3
     api.deform(obj)
@@ -281,7 +279,7 @@ def test_mesh_x_symmetry_makes_twins_and_keeps_a_rig_without_mirror_flags_symmet
     size = float(np.ptp(rest, axis=0).max())
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6), mirror=mirror)     # the chin: its own mirror image
     ear = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0), mirror=mirror)  # a twin across X
-    assert handles.twin_of(ear) is not None
+    assert handle_symmetry.twin_of(ear) is not None
     top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75), mirror=mirror)  # self-symmetric
     ear.location.z += 0.2
     top.location.x += 0.5                                     # across the plane: cannot stay symmetric
@@ -306,7 +304,7 @@ def test_s_on_a_self_symmetric_handle_keeps_the_scale_about_its_centre(scene, sc
     obj, rest, size = bound_monkey(mirror_x=True)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
     top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.75))  # its own mirror image
-    assert handles.twin_of(top) is None
+    assert handle_symmetry.twin_of(top) is None
     centre = np.array(handles.rest_local_of(top))[:3, 3]
     top.scale = (scale, scale, scale)                         # S about the handle's centre, as the drag does
     api.deform(obj)
@@ -342,11 +340,10 @@ def _raised_with(obj, grip, rest):
 
 @pytest.mark.parametrize("change", ["delete the twin", "copy the twin", "toggle off"])
 def test_mesh_and_proxy_agree_whatever_happens_to_the_twins(scene, change):
-    from skin_detach_addon.blender import handles
     obj, rest, _ = bound_monkey(mirror_x=True)
     api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.6))
     grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] < -1.0))
-    twin = handles.twin_of(grip)
+    twin = handle_symmetry.twin_of(grip)
     for other in bpy.context.view_layer.objects:
         other.select_set(False)
     if change == "delete the twin":
@@ -366,7 +363,6 @@ def test_mesh_and_proxy_agree_whatever_happens_to_the_twins(scene, change):
 
 
 def test_two_mirror_toggles_are_refused_with_a_message_and_one_axis_given_is_taken(scene):
-    from skin_detach_addon.blender import handles
     obj = monkey()
     obj.data.use_mirror_x = obj.data.use_mirror_y = True
     api.build(obj, target_faces=300)
@@ -376,7 +372,7 @@ def test_two_mirror_toggles_are_refused_with_a_message_and_one_axis_given_is_tak
         api.add_handle(obj, ear)
     assert api.handles_of(obj) == []
     grip = api.add_handle(obj, ear, mirror="X")
-    assert handles.twin_of(grip) is not None
+    assert handle_symmetry.twin_of(grip) is not None
 
 
 @pytest.mark.parametrize("toggle", [False, True])

@@ -16,7 +16,7 @@ from ..core.errors import SkinDetachError
 from ..core.held_detail import Layout
 from ..core.symmetry import symmetrize
 from . import binding as stored
-from . import handles, mesh_io
+from . import handle_symmetry, handles, mesh_io
 
 #: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL: a Newton step of at
 #: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
@@ -99,12 +99,12 @@ class Deformation:
         handles' transforms (``follow``, ``budget_ms``, ``idle``: see
         :meth:`Binding.solve_proxy`)."""
         empties = self.handles()
-        handles.sync_twins(self.obj, empties)
-        axis, asked = handles.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
+        handle_symmetry.sync_twins(self.obj, empties)
+        axis, asked = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
         #: Self-symmetric handles put back on a symmetric motion by this solve (names): only where
         #: symmetry was asked for; a rig symmetric by chance counts as symmetric while it moves so.
-        self.kept_symmetric = handles.keep_symmetric(self.obj, empties, axis) if axis and asked else []
-        if axis and not asked and not handles.moves_symmetrically(self.obj, empties, axis):
+        self.kept_symmetric = handle_symmetry.keep_symmetric(self.obj, empties, axis) if axis and asked else []
+        if axis and not asked and not handle_symmetry.moves_symmetrically(self.obj, empties, axis):
             axis = ""
         ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
         if ids.size == 0:

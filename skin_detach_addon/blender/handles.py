@@ -5,7 +5,8 @@ bound object's local space, ``delta = object_world^-1 @ empty_world @ rest_local
 the rest proxy positions. An anchor holds its proxy vertices at rest wherever its empty is.
 Each empty stores under ``empty["_skin_detach_handle"]``: its owner (an ID pointer), kind,
 ``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy) and ``rest_local``
-(16 float64, row-major). Handles made from detail vertices survive a Rebuild.
+(16 float64, row-major). Handles made from detail vertices survive a Rebuild. Mirror twins
+and symmetric rigs: :mod:`.handle_symmetry`.
 """
 
 import numpy as np
@@ -31,13 +32,13 @@ def is_handle(obj):
 
 def owner(empty):
     """The bound mesh object a handle or anchor empty belongs to (None if it is none)."""
-    found = _get(empty, "owner") if is_handle(empty) else None
+    found = value_of(empty, "owner") if is_handle(empty) else None
     return found if getattr(found, "type", None) is not None else None
 
 
 def kind_of(empty):
     """HANDLE or ANCHOR (raises for anything else)."""
-    kind = _get(empty, "kind")
+    kind = value_of(empty, "kind")
     if kind not in (HANDLE, ANCHOR):
         raise SkinDetachError(f"handle {empty.name!r}: expected kind {HANDLE!r} or {ANCHOR!r}, got {kind!r}; "
                               f"remove it")
@@ -45,7 +46,7 @@ def kind_of(empty):
 
 
 def _ids(empty, key, limit=None):
-    raw = np.asarray(_get(empty, key, []))
+    raw = np.asarray(value_of(empty, key, []))
     if raw.size and raw.dtype.kind not in "iu":
         raise SkinDetachError(f"handle {empty.name!r}: expected integer {key}, got {raw.dtype}; remove it")
     ids = raw.astype(np.int64).ravel()
@@ -68,7 +69,7 @@ def detail_ids_of(empty, n=None):
 def rest_local_of(empty):
     """(4, 4) float64 rest frame of the empty in the bound object's local space."""
     try:
-        frame = np.asarray(_get(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
+        frame = np.asarray(value_of(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
     except (TypeError, ValueError):
         frame = np.full((4, 4), np.nan)
     if not np.isfinite(frame).all():
@@ -80,12 +81,13 @@ def rest_local_of(empty):
 def handles_of(obj, proxy=None):
     """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices)."""
     pool = proxy.children if proxy is not None else _all_objects()
-    found = [o for o in pool if is_handle(o) and _get(o, "owner") == obj]
+    found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
     return sorted(found, key=lambda o: ages[o.name])
 
 
-def _get(empty, key, default=None):
+def value_of(empty, key, default=None):
+    """The value under ``key`` in a handle's record, or ``default`` (also when the record is damaged)."""
     tag = empty[TAG]
     return tag.get(key, default) if hasattr(tag, "get") else default
 
@@ -95,7 +97,7 @@ def _ages(empties):
     original's serial; where serials repeat, every copy but the first (by Blender's ".001"
     suffix) counts as made after all the others, so the copy is the newest."""
     def own(empty):
-        serial = _get(empty, "serial")
+        serial = value_of(empty, "serial")
         stem, dot, tail = empty.name.rpartition(".")
         copy = int(tail) if dot and tail.isdigit() else 0
         digits = (stem if copy else empty.name).rsplit("_", 1)[-1]
@@ -129,7 +131,7 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
     of its vertices, Blender's pivot for R and S) now and at rest, so an empty made on a deformed
     mesh starts out where the mesh is. ``group``: the vertex group it was made from (for the
     panel); ``mirror``: the local axis ("X", "Y", "Z") it is symmetric about or mirrored across
-    (see :func:`pair`)."""
+    (see :func:`.handle_symmetry.pair`)."""
     import bpy
     if kind not in (HANDLE, ANCHOR):
         raise SkinDetachError(f"kind: expected {HANDLE!r} or {ANCHOR!r}, got {kind!r}")
@@ -164,158 +166,9 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
     return empty
 
 
-AXES = ("X", "Y", "Z")
-
-
-def median_point(positions, ids, on_plane=""):
-    """(3,) the median point (Blender's: the mean) of ``positions`` (n, 3) at vertex ids (k,);
-    ``on_plane`` ("X", "Y", "Z" or ""): the selection is its own mirror image across that local
-    axis, so the point is put exactly on the mirror plane."""
-    point = np.asarray(positions[np.asarray(ids, dtype=np.int64)], dtype=np.float64).mean(axis=0)
-    if on_plane:
-        point[AXES.index(on_plane)] = 0.0
-    return point
-
-
-def mirror_matrix(axis):
-    """(4, 4) reflection across the plane through the origin normal to local ``axis``."""
-    out = np.eye(4)
-    out[AXES.index(axis), AXES.index(axis)] = -1.0
-    return out
-
-
-def pair(first, second):
-    """Make two empties mirror twins: moving either moves the other, mirrored across their axis."""
-    first[TAG]["twin"] = second
-    second[TAG]["twin"] = first
-    for empty in (first, second):
-        _mark_synced(empty)
-
-
-def twin_of(empty):
-    """The mirror twin of a handle or anchor, or None: twins point at each other (a Shift+D copy
-    of one keeps a pointer its original's twin does not return)."""
-    twin = _get(empty, "twin")
-    return twin if is_handle(twin) and _get(twin, "twin") == empty else None
-
-
-def mirror_of(empty):
-    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or ""."""
-    axis = _get(empty, "mirror", "")
-    return axis if axis in AXES else ""
-
-
 def group_of(empty):
     """The vertex group a handle was made from, or ""."""
-    return str(_get(empty, "group", ""))
-
-
-def _basis(empty):
-    return np.array(empty.matrix_basis, dtype=np.float64).ravel()
-
-
-def _mark_synced(empty):
-    empty[TAG]["synced"] = _basis(empty)
-
-
-def _moved(empty):
-    synced = np.asarray(_get(empty, "synced", []), dtype=np.float64)
-    return synced.shape != (16,) or not np.array_equal(synced, _basis(empty))
-
-
-def sync_twins(obj, empties):
-    """Move every twin whose partner moved since the last sync to the mirror image of the
-    partner's motion (in ``obj``'s local space); when both moved, the older one leads."""
-    done = set()
-    for empty in empties:
-        twin = twin_of(empty)
-        if twin is None or empty.name in done or mirror_of(empty) == "":
-            continue
-        done.update((empty.name, twin.name))
-        if not (_moved(empty) or _moved(twin)):
-            continue
-        lead, follow = (empty, twin) if _moved(empty) or not _moved(twin) else (twin, empty)
-        reflect = mirror_matrix(mirror_of(empty))
-        motion = reflect @ local_motion(obj, lead) @ reflect
-        world = np.array(obj.matrix_world, dtype=np.float64) @ motion @ rest_local_of(follow)
-        follow.matrix_world = Matrix(world.tolist())
-        _mark_synced(lead)
-        _mark_synced(follow)
-
-
-def symmetry_axis(obj, empties, own_mirror_image):
-    """(axis, asked): the local axis ("X", "Y", "Z") a rig of ``obj`` is symmetric about, or "",
-    and whether symmetry was asked for across it. Symmetric: each handle and anchor of
-    ``empties`` has a mirror twin across the axis or holds mesh vertices that are their own
-    mirror image (``own_mirror_image(detail_ids (k,), axis) -> bool``), whatever the mesh's
-    toggles and the handles' mirror flags say; asked: the mesh's mirror toggle for the axis is
-    on or a handle carries its mirror flag. A lone flagged handle (its twin deleted) or a Shift+D
-    copy of a twin (nobody's twin) makes the rig asymmetric, so the detail is never averaged with
-    a side the proxy does not mirror."""
-    for axis in AXES if empties else ():
-        if all(mirror_of(e) == axis and twin_of(e) is not None or self_symmetric(e, axis, own_mirror_image)
-               for e in empties):
-            asked = getattr(obj.data, f"use_mirror_{axis.lower()}", False) or any(mirror_of(e) == axis for e in empties)
-            return axis, bool(asked)
-    return "", False
-
-
-def moves_symmetrically(obj, empties, axis):
-    """Every handle of ``empties`` without a twin moves by a motion that commutes with the mirror
-    across ``axis`` (twins are mirrored by :func:`sync_twins`)."""
-    return not any(_made_symmetric(obj, empty, axis) is not None for empty in _lone_handles(empties))
-
-
-def _lone_handles(empties):
-    """The handles of ``empties`` without a mirror twin (anchors and twins move symmetrically)."""
-    return [e for e in empties if kind_of(e) == HANDLE and twin_of(e) is None]
-
-
-def _made_symmetric(obj, empty, axis):
-    """(4, 4) the nearest motion to the handle's that commutes with the mirror across ``axis``, or
-    None when its own already does (within 1e-9 of its size)."""
-    motion = local_motion(obj, empty)
-    symmetric = symmetric_motion(motion, axis)
-    return symmetric if np.abs(symmetric - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()) else None
-
-
-def self_symmetric(empty, axis, own_mirror_image):
-    """The handle was made from mesh vertices that are their own mirror image across ``axis``."""
-    ids = detail_ids_of(empty)
-    return ids.size > 0 and own_mirror_image(ids, axis)
-
-
-def symmetric_motion(motion, axis):
-    """(4, 4) the motion nearest to ``motion`` (4, 4) that commutes with the mirror across
-    ``axis``, of the same kind: the linear part's polar factors A = Q P (Q orthogonal, P the
-    symmetric stretch: a uniform scale, negative or zero included) are each made symmetric, Q by
-    the nearest orthogonal matrix of the same handedness to its average with its mirror image, P
-    and the translation by that average. A rigid motion stays rigid, a uniform scale (S) about a
-    centre on the plane is kept as it is."""
-    reflect = mirror_matrix(axis)
-    flip = reflect[:3, :3]
-    u, sigma, vt = np.linalg.svd(motion[:3, :3])
-    turn, stretch = u @ vt, (vt.T * sigma) @ vt
-    w, _, zt = np.linalg.svd(0.5 * (turn + flip @ turn @ flip))
-    if np.linalg.det(w @ zt) * np.linalg.det(turn) < 0:
-        w[:, -1] *= -1.0
-    out = 0.5 * (motion + reflect @ motion @ reflect)
-    out[:3, :3] = (w @ zt) @ (0.5 * (stretch + flip @ stretch @ flip))
-    return out
-
-
-def keep_symmetric(obj, empties, axis):
-    """Put every self-symmetric handle (no twin) of a rig symmetric about ``axis`` on the nearest
-    symmetric motion (a move across the plane cannot keep the mesh symmetric); returns the
-    names of those it moved."""
-    moved = []
-    for empty in _lone_handles(empties):
-        symmetric = _made_symmetric(obj, empty, axis)
-        if symmetric is not None:
-            world = np.array(obj.matrix_world, dtype=np.float64) @ symmetric @ rest_local_of(empty)
-            empty.matrix_world = Matrix(world.tolist())
-            moved.append(empty.name)
-    return moved
+    return str(value_of(empty, "group", ""))
 
 
 def _free_name(base):
@@ -350,7 +203,7 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
 def has_old_pivot(empty):
     """The empty was made by an earlier version: its R/S pivot is the centroid of the proxy
     vertices it holds, not the selection's median point (a Rebuild moves it there)."""
-    return _get(empty, "pivot") != PIVOT and detail_ids_of(empty).size > 0
+    return value_of(empty, "pivot") != PIVOT and detail_ids_of(empty).size > 0
 
 
 def local_motion(obj, empty):

@@ -11,7 +11,7 @@ from ..core.held_detail import held_proxy_vertices
 from ..core.surface import SkinDetachedSurface
 from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
-from . import handles, mesh_io
+from . import handle_symmetry, handles, mesh_io
 
 RIG_COLLECTION = "Skin Detach"
 #: A collection the add-on made carries its role under this key ("Skin Detach", "Skin Detach Bake").
@@ -133,11 +133,11 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     for empty, detail in old:
         if detail is not None and detail.size:
             ids = held_proxy_vertices(surface, detail)
-            twin = handles.twin_of(empty)
+            twin, axis = handle_symmetry.twin_of(empty), handle_symmetry.mirror_of(empty)
             if twin is not None and twin.name in centers:  # the twin's, mirrored: exact
-                center = handles.mirror_matrix(handles.mirror_of(empty))[:3, :3] @ centers[twin.name]
+                center = handle_symmetry.mirror_matrix(axis)[:3, :3] @ centers[twin.name]
             else:
-                center = handles.median_point(positions, detail, handles.mirror_of(empty) if twin is None else "")
+                center = handle_symmetry.median_point(positions, detail, axis if twin is None else "")
             centers[empty.name] = center
             handles.rebind(empty, proxy, ids, center)
             kept += 1
