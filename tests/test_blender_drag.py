@@ -226,7 +226,7 @@ def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_resto
 
 def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
     from types import SimpleNamespace
-    from skin_detach_addon.blender.binding import follow_start
+    from skin_detach_addon.core.proxy_solves import follow_start
     rng = np.random.default_rng(3)
     older = rng.normal(size=(50, 3))
     last = older + rng.normal(size=(50, 3))                  # a large jump, cut short or a snap

@@ -41,7 +41,7 @@ def _same_solve_as_from_rest(obj):
     the same proxy (the detail of Apply is also smoothed across the skin's seams)."""
     proxy = binding.proxy_of(obj)
     shown = mesh_io.read_positions(proxy.data).copy()
-    binding.open_binding(obj).forget_warm_starts()
+    binding.open_binding(obj).solves.forget_warm_starts()
     api.deform(obj)
     assert np.abs(mesh_io.read_positions(proxy.data) - shown).max() <= 1e-5 * _diagonal(obj)
 

@@ -8,6 +8,7 @@ bpy = pytest.importorskip("bpy")
 from blender_support import activate, band, import_spot, rig, save_and_reopen, select_vertices  # noqa: E402
 
 from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
+from skin_detach_addon.core import proxy_solves  # noqa: E402
 
 
 def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(scene):
@@ -282,14 +283,14 @@ def test_panel_draws_build_handles_deform_and_figures(scene):
 def test_a_solve_that_did_not_converge_is_reported_by_apply_and_the_panel(scene, monkeypatch, capfd):
     obj = import_spot()
     handle = rig(obj, axis=1)
-    monkeypatch.setattr(binding, "MAX_ITERATIONS", 1)
+    monkeypatch.setattr(proxy_solves, "MAX_ITERATIONS", 1)
     handle.location.x += 0.3
     activate(handle)
     assert bpy.ops.skin_detach.apply() == {'FINISHED'}
     assert "the solve did not converge" in capfd.readouterr().out
     activate(obj)
     assert ("label", "The last solve did not converge") in _draw_panel()
-    monkeypatch.setattr(binding, "MAX_ITERATIONS", 300)
+    monkeypatch.setattr(proxy_solves, "MAX_ITERATIONS", 300)
     activate(handle)
     assert bpy.ops.skin_detach.apply() == {'FINISHED'}
     assert "did not converge" not in capfd.readouterr().out

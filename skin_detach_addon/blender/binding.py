@@ -14,10 +14,10 @@ import zlib
 
 import numpy as np
 
-from ..core.dual_laplacian import DualLaplacian
 from ..core.errors import SkinDetachError
 from ..core.surface import Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
+from ..core.proxy_solves import ProxySolves
 from ..core.stretch import SkinStretch
 from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
 from . import mesh_io
@@ -29,32 +29,8 @@ PROXY_TAG = "_skin_detach_proxy_of"
 PREVIEW_TAG = "_skin_detach_preview_of"
 #: Stored arrays of the preview's skin carry this prefix.
 PREVIEW_PREFIX = "preview_"
-#: Iterations a proxy solve may take before it reports that it did not converge.
-MAX_ITERATIONS = 300
 SCHEMA_VERSION = 1
 _CACHE = {}
-
-
-def follow_start(recent, ids, targets):
-    """(m, 3) where a drag's next solve starts, or None (from rest) without ``recent`` solutions
-    (newest first, :class:`DualLaplacianResult`) of the same constrained ``ids`` (c,); ``targets``
-    (c, 3) their new positions. The targets stand still (a settle, a confirm): the last solution,
-    to go on from. They moved: the last solution plus the motion between the last two, scaled down
-    so that no vertex is carried farther than the constrained vertices move now. An unbounded
-    extrapolation 2 x1 - x2 doubles whatever jump the last solve made, also one the budget cut
-    short or a snap of the energy's own path, and feeds it back: the shown shape flailed. Bounded,
-    the start adds no more than the handles' own motion to any vertex."""
-    if not recent:
-        return None
-    last = recent[0].vertices
-    if len(recent) < 2 or np.array_equal(last[ids], targets):
-        return last
-    motion = last - recent[1].vertices
-    largest = float(np.sqrt(np.max(np.einsum("ij,ij->i", motion, motion))))
-    handles = float(np.sqrt(np.max(np.einsum("ij,ij->i", targets - last[ids], targets - last[ids]))))
-    if largest <= 0.0:
-        return last
-    return last + min(1.0, handles / largest) * motion
 
 
 class Binding:
@@ -64,6 +40,7 @@ class Binding:
     rest     (n, 3) float32 rest positions, exactly as they were in the mesh
     proxy    the proxy object
     preview  core Preview (c vertices over the same proxy) or None
+    solves   the proxy's solvers and warm starts (:class:`.core.proxy_solves.ProxySolves`)
     """
 
     def __init__(self, binding_id, surface, rest, proxy, preview=None):
@@ -72,7 +49,7 @@ class Binding:
         self.rest = rest
         self.proxy = proxy
         self.preview = preview
-        self._solvers = {}
+        self.solves = ProxySolves(surface)
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
         self._preview_buffer = None if preview is None else np.empty((preview.points.shape[0], 3), dtype=np.float32)
         #: Figures of the last step in this session (dict, see StepReport.figures), or None.
@@ -92,32 +69,6 @@ class Binding:
             self._stretch = SkinStretch(self.surface)
         return self._stretch(proxy_vertices)
 
-    def solve_proxy(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False, layout=None,
-                    motions=()):
-        """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3),
-        the held detail of ``layout`` (a :class:`.core.held_detail.Layout`) pulled along
-        ``motions`` (one (4, 4) per pair of ``layout.held``).
-        One :class:`DualLaplacian` is factored per set of ids and layout (the last few are kept). With
-        ``follow`` the solve starts from :func:`follow_start` of the last two solutions of the
-        same set, as a drag does, and stops after ``budget_ms`` (None: no limit; ``idle``: see
-        :meth:`DualLaplacian.solve`); without it from rest, so the same handles give the same
-        shape whatever was solved before (Apply, bake)."""
-        key = (ids.tobytes(), bool(preserve_volume), None if layout is None else layout.key())
-        if key not in self._solvers:
-            if len(self._solvers) >= 8:
-                self._solvers.pop(next(iter(self._solvers)))
-            pulls = [] if layout is None else [self.surface.drop_rows(detail, layout.groups)
-                                               for _, detail in layout.held]
-            self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
-                                                preserve_volume=preserve_volume, pulls=pulls), []]
-        solver, recent = self._solvers[key]
-        initial = follow_start(recent, ids, targets) if follow else None
-        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
-                              budget_ms=budget_ms if follow else None, idle=idle and follow,
-                              pull_motions=list(motions) if solver.n_pulls else None)
-        self._solvers[key][1] = [result] + recent[:1]
-        return result
-
     def mirror_map(self, axis):
         """(n,) mirror twin of every mesh vertex across local ``axis`` ("X", "Y", "Z") at rest,
         -1 where there is none (cached)."""
@@ -135,10 +86,6 @@ class Binding:
             tolerance = MIRROR_TOLERANCE * bbox_diagonal(self.rest)
             self._own_images[key] = ids.size > 0 and is_own_mirror_image(self.rest[ids], "XYZ".index(axis), tolerance)
         return self._own_images[key]
-
-    def forget_warm_starts(self):
-        for entry in self._solvers.values():
-            entry[1] = []
 
     def rebuild(self, proxy_vertices, layout=None):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``layout``: their

@@ -97,7 +97,7 @@ class Deformation:
     def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`) from the
         handles' transforms (``follow``, ``budget_ms``, ``idle``: see
-        :meth:`Binding.solve_proxy`)."""
+        :meth:`.core.proxy_solves.ProxySolves.solve`)."""
         empties = self.handles()
         handle_symmetry.sync_twins(self.obj, empties)
         axis, asked = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
@@ -111,8 +111,8 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
         layout = Layout(groups, [(label, ids_) for label, ids_, _ in detail])
-        result = self.binding.solve_proxy(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
-                                          layout, [motion for _, _, motion in detail])
+        result = self.binding.solves.solve(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
+                                           layout, [motion for _, _, motion in detail])
         #: The last solve's (symmetry axis, result, layout): what :meth:`commit` rebuilds from.
         self.solved = (axis, result, layout)
         return axis, result, layout
@@ -245,7 +245,7 @@ class Deformation:
         mesh_io.restore(self.proxy.data, saved.proxy)
         stored.set_written_state(self.obj, saved.written)
         self.show_preview(False)
-        self.binding.forget_warm_starts()
+        self.binding.solves.forget_warm_starts()
 
     def reset(self):
         """Rest shape back in the mesh and the proxy (bit-exact), every empty back at its rest frame.
@@ -257,7 +257,7 @@ class Deformation:
         self._write(self.binding.rest, self.binding.surface.proxy_vertices)
         for empty, frame in zip(empties, frames):
             empty.matrix_basis = Matrix(frame.tolist())
-        self.binding.forget_warm_starts()
+        self.binding.solves.forget_warm_starts()
 
     def _check_no_applied_transform(self):
         """A mesh that holds what Skin Detach wrote is a pose of its own: any pose, rigid ones
