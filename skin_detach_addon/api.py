@@ -18,7 +18,7 @@ the expected and the actual value; nothing is written when it raises.
 
 import numpy as np
 
-from .blender import baking, handle_symmetry, handles, mesh_io, skin_rig
+from .blender import baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, skin_rig
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
@@ -213,12 +213,12 @@ def before_save():
 def _write_shown_pose(obj):
     """Where the preview stands in for ``obj``, write the pose it shows into the mesh in full detail
     (the mesh is shown again); the mesh is shown again even when that cannot be solved."""
-    if not stored.preview_stands_in(obj):
+    if not preview_stand_in.preview_stands_in(obj):
         return
     try:
         Deformation(obj).step(follow=True)
     finally:
-        stored.end_stand_in(obj)
+        preview_stand_in.end_stand_in(obj)
 
 
 def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
@@ -234,7 +234,7 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
 def preview_stands_in(obj):
     """The preview object is shown in place of the mesh ``obj`` (which holds an older pose until
     the next full :func:`deform`)."""
-    return stored.preview_stands_in(_owner(obj))
+    return preview_stand_in.preview_stands_in(_owner(obj))
 
 
 def is_bound(obj):
@@ -378,7 +378,7 @@ def figures(obj):
     :func:`build`) under "build" and the last step in this session under "last_step" (dict as
     returned by :func:`deform`, or None)."""
     obj = _bound(obj)
-    return {"build": stored.stats_of(obj), "last_step": stored.last_step(obj)}
+    return {"build": binding_figures.stats_of(obj), "last_step": binding_figures.last_step(obj)}
 
 
 def bound_objects(objects=None):

@@ -11,6 +11,7 @@ from blender_support import TopView, activate, import_spot, rig, save_and_reopen
 
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.blender import binding, mesh_io, skin_rig  # noqa: E402
+from skin_detach_addon.blender.preview_stand_in import preview_of  # noqa: E402
 from skin_detach_addon.blender.drag_session import CANCELLED, FINISHED, DragSession  # noqa: E402
 from skin_detach_addon.ui import live_update  # noqa: E402
 
@@ -48,16 +49,16 @@ def _same_solve_as_from_rest(obj):
 
 def test_build_makes_a_hidden_preview_only_above_the_threshold(scene):
     obj, _ = _rigged(scene)
-    preview = binding.preview_of(obj)
+    preview = preview_of(obj)
     n = len(obj.data.vertices)
     assert preview is not None and preview.hide_viewport and preview.hide_render
     assert 0.5 * n / 8 <= len(preview.data.vertices) <= 1.5 * n / 8  # an eighth of the mesh at most
     assert api.mesh_of(preview) is obj and api.figures(obj)["build"]["preview_vertices"] == len(preview.data.vertices)
     api.build(preview, target_faces=300, preview_above=LOW)  # the preview stands for its mesh: rebinds it
-    assert binding.preview_of(obj) is not None and binding.preview_of(obj) != preview
+    assert preview_of(obj) is not None and preview_of(obj) != preview
     assert len([o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]) == 1
     api.build(obj, target_faces=300, preview_above=None)  # no preview: the old one goes
-    assert binding.preview_of(obj) is None
+    assert preview_of(obj) is None
     assert not [o for o in bpy.data.objects if o.get(binding.PREVIEW_TAG) is not None]
     with pytest.raises(api.SkinDetachError, match="preview_above"):
         api.build(obj, preview_above=-1)
@@ -65,7 +66,7 @@ def test_build_makes_a_hidden_preview_only_above_the_threshold(scene):
 
 def test_preview_drag_leaves_the_mesh_alone_and_confirm_writes_the_settled_detail(scene):
     obj, handle = _rigged(scene)
-    preview = binding.preview_of(obj)
+    preview = preview_of(obj)
     before = mesh_io.read_positions(obj.data)
     preview_rest = mesh_io.read_positions(preview.data)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
@@ -84,7 +85,7 @@ def test_preview_drag_leaves_the_mesh_alone_and_confirm_writes_the_settled_detai
 
 def test_a_preview_drag_settles_on_timer_events_and_its_confirm_writes_that_shape_in_full_detail(scene):
     obj, handle = _rigged(scene)
-    preview = binding.preview_of(obj)
+    preview = preview_of(obj)
     before = mesh_io.read_positions(obj.data).copy()
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
@@ -110,12 +111,12 @@ def test_preview_cancel_restores_everything_bit_exact(scene):
     before = _state(obj)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
-    assert binding.preview_of(obj).hide_viewport  # nothing shows in place of a mesh the user hid
+    assert preview_of(obj).hide_viewport  # nothing shows in place of a mesh the user hid
     assert session.event("ESC", "PRESS", (130, 80)) == CANCELLED
     after = _state(obj)
     assert np.array_equal(after[0], before[0]) and np.array_equal(after[1], before[1])
     assert all(np.array_equal(x, y) for x, y in zip(after[2], before[2])) and after[3] == before[3]
-    assert obj.hide_viewport and binding.preview_of(obj).hide_viewport
+    assert obj.hide_viewport and preview_of(obj).hide_viewport
 
 
 def test_below_the_threshold_or_without_a_preview_the_detail_follows_every_move(scene):
@@ -124,9 +125,9 @@ def test_below_the_threshold_or_without_a_preview_the_detail_follows_every_move(
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=10**7)
     session.event("MOUSEMOVE", "NOTHING", (120, 90))
     assert np.abs(mesh_io.read_positions(obj.data) - before).max() > 0.05
-    assert binding.preview_of(obj).hide_viewport and "preview" not in session.header
+    assert preview_of(obj).hide_viewport and "preview" not in session.header
     session.event("ESC", "PRESS", (120, 90))
-    skin_rig.remove_with_mesh(binding.preview_of(obj))  # the user deleted the preview
+    skin_rig.remove_with_mesh(preview_of(obj))  # the user deleted the preview
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (120, 90))
     assert np.abs(mesh_io.read_positions(obj.data) - before).max() > 0.05
@@ -142,12 +143,12 @@ def test_live_update_shows_the_preview_then_writes_the_detail_when_idle(scene):
     live_update.notice(scene)
     live_update.flush()
     assert np.array_equal(mesh_io.read_positions(obj.data), before)
-    assert not binding.preview_of(obj).hide_viewport and obj.hide_viewport
+    assert not preview_of(obj).hide_viewport and obj.hide_viewport
     assert live_update.settle(now=time.monotonic()) is not None  # not idle long enough yet: waits
     assert live_update.settle(only="another") is not None  # settling another object leaves this one
-    assert not binding.preview_of(obj).hide_viewport
+    assert not preview_of(obj).hide_viewport
     assert live_update.settle(now=time.monotonic() + 10 * live_update.IDLE_SECONDS) is None
-    assert binding.preview_of(obj).hide_viewport and not obj.hide_viewport
+    assert preview_of(obj).hide_viewport and not obj.hide_viewport
     settled = mesh_io.read_positions(obj.data)
     assert np.abs(settled - before).max() > 0.05
     # A drag starting on a previewed object settles it at once (Drag Handle calls this first).
@@ -179,28 +180,28 @@ def test_a_mesh_too_small_for_a_preview_builds_without_one(scene):
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=2)  # 42 vertices: an eighth is under the minimum
     obj = bpy.context.active_object
     figures = api.build(obj, target_faces=40, preview_above=0)
-    assert figures["preview_vertices"] in (0, None) and binding.preview_of(obj) is None
+    assert figures["preview_vertices"] in (0, None) and preview_of(obj) is None
 
 
 def _drag_with_preview(scene):
     obj, handle = _rigged(scene)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
-    assert obj.hide_viewport and not binding.preview_of(obj).hide_viewport
+    assert obj.hide_viewport and not preview_of(obj).hide_viewport
     return obj, handle, session
 
 
 @pytest.mark.parametrize("end", ["RET", "ESC"])
 def test_a_preview_deleted_mid_drag_leaves_the_mesh_visible(scene, end):
     obj, _, session = _drag_with_preview(scene)
-    bpy.data.objects.remove(binding.preview_of(obj))
+    bpy.data.objects.remove(preview_of(obj))
     session.event(end, "PRESS", (130, 80))
     assert not obj.hide_viewport
 
 
 def test_the_user_hiding_the_preview_does_not_hide_the_mesh_for_good(scene):
     obj, handle, session = _drag_with_preview(scene)
-    binding.preview_of(obj).hide_viewport = True
+    preview_of(obj).hide_viewport = True
     session.event("MOUSEMOVE", "NOTHING", (140, 70))
     session.event("RET", "PRESS", (140, 70))
     assert not obj.hide_viewport
@@ -211,7 +212,7 @@ def test_the_preview_stays_hidden_when_the_user_hid_the_mesh_with_h(scene):
     obj.hide_set(True)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
-    assert binding.preview_of(obj).hide_viewport and obj.hide_get() and not obj.hide_viewport
+    assert preview_of(obj).hide_viewport and obj.hide_get() and not obj.hide_viewport
     session.event("RET", "PRESS", (130, 80))
     assert obj.hide_get() and not obj.hide_viewport
 

@@ -7,7 +7,7 @@ bpy = pytest.importorskip("bpy")
 
 from blender_support import activate, band, import_spot, rig, save_and_reopen, select_vertices  # noqa: E402
 
-from skin_detach_addon.blender import binding, handles, mesh_io, skin_rig  # noqa: E402
+from skin_detach_addon.blender import binding, binding_figures, handles, mesh_io, skin_rig  # noqa: E402
 from skin_detach_addon.core import proxy_solves  # noqa: E402
 
 
@@ -21,7 +21,7 @@ def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(
     assert [c.name for c in proxy.users_collection] == [skin_rig.RIG_COLLECTION]
     assert np.allclose(np.array(proxy.matrix_world), np.array(obj.matrix_world))
     assert 300 <= len(proxy.data.polygons) <= 400
-    stats = binding.stats_of(obj)
+    stats = binding_figures.stats_of(obj)
     assert stats["detail_vertices"] == len(obj.data.vertices)
 
     select_vertices(obj, band(obj, 0.8, 1.0, axis=1))

@@ -6,9 +6,10 @@ digest of the positions Skin Detach last wrote, the proxy object (an ID pointer)
 positions (3n float32, the mesh's own vertex order) and the core surface's arrays (float64 or
 int32, flattened). Nothing is pickled or evaluated. The core objects rebuilt from it are cached
 per binding id, so undo and reload find them again or rebuild them from the properties.
+What reads or changes the record for one purpose has its own module: the preview standing in
+for the mesh (:mod:`.preview_stand_in`), the figures the panel shows (:mod:`.binding_figures`).
 """
 
-import json
 import uuid
 import zlib
 
@@ -36,11 +37,12 @@ _CACHE = {}
 class Binding:
     """Runtime side of one stored binding.
 
-    surface  SkinDetachedSurface over the mesh's n vertices
-    rest     (n, 3) float32 rest positions, exactly as they were in the mesh
-    proxy    the proxy object
-    preview  core Preview (c vertices over the same proxy) or None
-    solves   the proxy's solvers and warm starts (:class:`.core.proxy_solves.ProxySolves`)
+    surface     SkinDetachedSurface over the mesh's n vertices
+    rest        (n, 3) float32 rest positions, exactly as they were in the mesh
+    proxy       the proxy object
+    preview     core Preview (c vertices over the same proxy) or None
+    solves      the proxy's solvers and warm starts (:class:`.core.proxy_solves.ProxySolves`)
+    last_step   figures of the last step in this session (dict, see StepReport.figures), or None
     """
 
     def __init__(self, binding_id, surface, rest, proxy, preview=None):
@@ -52,7 +54,6 @@ class Binding:
         self.solves = ProxySolves(surface)
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
         self._preview_buffer = None if preview is None else np.empty((preview.points.shape[0], 3), dtype=np.float32)
-        #: Figures of the last step in this session (dict, see StepReport.figures), or None.
         self.last_step = None
         self._mirrors = {}
         self._own_images = {}
@@ -238,12 +239,19 @@ def _checked_rest(obj, props, n):
     return rest
 
 
-def _stored_object(obj, key):
+def readable_record(obj):
+    """The stored property group of ``obj``'s binding, or None when it has none or it is damaged
+    (not a group)."""
+    return obj[KEY] if has_binding(obj) and hasattr(obj[KEY], "get") else None
+
+
+def stored_object(obj, key):
     """The object stored under ``key`` in ``obj``'s binding, or None when there is none or it was
     deleted (deleting an object in the viewport unlinks it; the pointer may keep an orphan alive)."""
-    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
+    record = readable_record(obj)
+    if record is None:
         return None
-    found = obj[KEY].get(key)
+    found = record.get(key)
     if found is None or not hasattr(found, "users_scene") or getattr(found, "type", None) is None \
             or not found.users_scene:
         return None
@@ -252,47 +260,7 @@ def _stored_object(obj, key):
 
 def proxy_of(obj):
     """The proxy object of ``obj``, or None when it has none or it was deleted."""
-    return _stored_object(obj, "proxy")
-
-
-def preview_of(obj):
-    """The preview object of ``obj`` when it has one, it still exists and it matches the stored
-    preview (same vertex count), else None (a drag then shows the full detail)."""
-    preview = _stored_object(obj, "preview")
-    if preview is None or preview.type != 'MESH' or preview.get(PREVIEW_TAG) != obj:
-        return None
-    count = obj[KEY].get(PREVIEW_PREFIX + "weld")
-    if count is None or len(preview.data.vertices) != len(count):
-        return None
-    return preview
-
-
-def _has_stand_in_record(obj):
-    return has_binding(obj) and hasattr(obj[KEY], "get") and "mesh_hidden" in obj[KEY]
-
-
-def preview_stands_in(obj):
-    """The preview object stands in for the mesh ``obj``: the add-on hid the mesh in viewports
-    and recorded its own state (a record on a visible mesh is stale: from an older file)."""
-    return _has_stand_in_record(obj) and bool(obj.hide_viewport)
-
-
-def record_stand_in(obj, preview):
-    """Hide the mesh ``obj`` and show ``preview`` in its place, recording the mesh's own state."""
-    obj[KEY]["mesh_hidden"] = bool(obj.hide_viewport)
-    preview.hide_viewport = False
-    obj.hide_viewport = True
-
-
-def end_stand_in(obj):
-    """Give the mesh ``obj`` back its own viewport state and hide its preview (if any is left)."""
-    preview = preview_of(obj) if has_binding(obj) else None
-    if preview is not None:
-        preview.hide_viewport = True
-    if preview_stands_in(obj):
-        obj.hide_viewport = bool(obj[KEY]["mesh_hidden"])
-    if _has_stand_in_record(obj):
-        del obj[KEY]["mesh_hidden"]
+    return stored_object(obj, "proxy")
 
 
 def check_unedited(obj):
@@ -351,45 +319,14 @@ def rest_positions(obj):
 
 def binding_id(obj):
     """The id of ``obj``'s binding (changes with every Build), or None without one."""
-    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
-        return None
-    value = obj[KEY].get("binding_id")
+    record = readable_record(obj)
+    value = None if record is None else record.get("binding_id")
     return value if isinstance(value, str) else None
 
 
-def last_step(obj):
-    """Figures of the last step of ``obj``'s binding in this session (dict), or None."""
-    binding = _CACHE.get(binding_id(obj))
-    return None if binding is None else binding.last_step
-
-
-#: Build figures the add-on reads back, and the type each must have (a damaged one is dropped).
-_COUNTS = ("detail_vertices", "proxy_vertices", "proxy_faces", "target_faces", "preview_vertices")
-
-
-def stats_of(obj):
-    """The core build figures stored with the binding (dict), or {} (also when unreadable). Counts
-    that are not non-negative integers, ``seconds`` that is not a dict of numbers and a
-    ``target_reached`` that is not a bool are left out, so readers may trust what is there."""
-    if not has_binding(obj) or not hasattr(obj[KEY], "get"):
-        return {}
-    try:
-        stats = json.loads(str(obj[KEY].get("stats", "{}")))
-    except ValueError:
-        return {}
-    if not isinstance(stats, dict):
-        return {}
-    for key in _COUNTS:
-        value = stats.get(key)
-        if key in stats and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
-            del stats[key]
-    seconds = stats.get("seconds")
-    if "seconds" in stats and not (isinstance(seconds, dict) and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in seconds.values())):
-        del stats["seconds"]
-    if "target_reached" in stats and not isinstance(stats["target_reached"], bool):
-        del stats["target_reached"]
-    return stats
+def cached(obj):
+    """The :class:`Binding` of ``obj`` opened in this session (its figures, its solvers), or None."""
+    return _CACHE.get(binding_id(obj))
 
 
 def forget(obj):

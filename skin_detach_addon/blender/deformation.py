@@ -17,6 +17,7 @@ from ..core.held_detail import Layout
 from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io
+from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
 
 #: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL: a Newton step of at
 #: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
@@ -159,7 +160,7 @@ class Deformation:
     @property
     def preview(self):
         """The preview object a drag may show instead of the mesh, or None."""
-        return stored.preview_of(self.obj) if self.binding.preview is not None else None
+        return preview_of(self.obj) if self.binding.preview is not None else None
 
     def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS, idle=False):
         """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
@@ -185,16 +186,16 @@ class Deformation:
     def show_preview(self, shown, preview=None):
         """Show the preview object (``preview``, looked up when not given) and hide the mesh in
         viewports, or the other way round. While the preview stands in, the binding records the
-        mesh's own state (see :func:`binding.preview_stands_in`), given back exactly whatever
-        happened to the preview meanwhile (deleted, hidden by the user). A mesh the user hid
-        (H or the viewport toggle) gets no preview in its place."""
+        mesh's own state (see :func:`.preview_stand_in.preview_stands_in`), given back exactly
+        whatever happened to the preview meanwhile (deleted, hidden by the user). A mesh the user
+        hid (H or the viewport toggle) gets no preview in its place."""
         preview = self.preview if preview is None else preview
         if shown:
-            if preview is None or stored.preview_stands_in(self.obj) or _hidden_by_user(self.obj):
+            if preview is None or preview_stands_in(self.obj) or _hidden_by_user(self.obj):
                 return
-            stored.record_stand_in(self.obj, preview)
+            record_stand_in(self.obj, preview)
         else:
-            stored.end_stand_in(self.obj)
+            end_stand_in(self.obj)
 
     def _check_writable(self, proxy_positions, targets, positions):
         """Raise, writing nothing, unless the solved proxy and every array to write (``positions``,
