@@ -22,6 +22,7 @@ from ..core.proxy_solves import ProxySolves
 from ..core.stretch import SkinStretch
 from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
 from . import mesh_io
+from .mesh_guard import MeshGuard
 
 KEY = "_skin_detach"
 #: A proxy object points back at its mesh under this key ...
@@ -42,6 +43,7 @@ class Binding:
     proxy       the proxy object
     preview     core Preview (c vertices over the same proxy) or None
     solves      the proxy's solvers and warm starts (:class:`.core.proxy_solves.ProxySolves`)
+    mesh_guard  the mesh's :class:`.mesh_guard.MeshGuard`, armed while a drag shows the preview
     last_step   figures of the last step in this session (dict, see StepReport.figures), or None
     """
 
@@ -57,10 +59,7 @@ class Binding:
         self.last_step = None
         self._mirrors = {}
         self._own_images = {}
-        #: A drag that shows the preview and never snapshots the mesh sets this to {} while it runs;
-        #: the first write of the mesh meanwhile (a save settling the preview) keeps the mesh's
-        #: snapshot under "mesh" first, for the drag's cancel to restore.
-        self.mesh_guard = None
+        self.mesh_guard = MeshGuard()
         self._stretch = None
 
     def stretch(self, proxy_vertices):

@@ -213,11 +213,9 @@ class Deformation:
     def _write(self, detail, proxy_positions, mark=True):
         """Write the mesh and the proxy, or neither: every check comes first. The mesh is shown
         again if a preview stood in for it. A preview drag's guard gets the mesh's snapshot first
-        (see :attr:`Binding.mesh_guard`)."""
+        (see :class:`.mesh_guard.MeshGuard`)."""
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
-        guard = self.binding.mesh_guard
-        if guard is not None and "mesh" not in guard:
-            guard["mesh"] = mesh_io.snapshot(self.obj.data)
+        self.binding.mesh_guard.before_write(self.obj.data)
         stretch = self.binding.stretch(proxy_positions) if mark else None
         mesh_io.write_positions(self.obj.data, detail)
         mesh_io.write_positions(self.proxy.data, proxy_positions)

@@ -104,7 +104,7 @@ class DragSession:
         # should anything else write it meanwhile (a save settles the preview), the guard keeps it.
         self._saved = self.deformation.snapshot(mesh=not self.previewing)
         if self.previewing:
-            self.deformation.binding.mesh_guard = {}
+            self.deformation.binding.mesh_guard.arm()
         self.start = empty.matrix_world.copy()
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
@@ -278,7 +278,7 @@ class DragSession:
     def confirm(self):
         """Keep the result: a settled drag's shape as shown (in full detail), else the last
         move's shape certified to the settle tolerance (continued from it)."""
-        self.deformation.binding.mesh_guard = None
+        self.deformation.binding.mesh_guard.release()
         _RUNNING.discard(self)
         if self.last is not None:
             self.last = self.deformation.commit() if self.settled else self.deformation.step(follow=True)
@@ -286,10 +286,10 @@ class DragSession:
 
     def cancel(self):
         """Everything back bit for bit: empties, mesh (and shape keys), proxy, stored digest."""
-        guard, self.deformation.binding.mesh_guard = self.deformation.binding.mesh_guard, None
+        kept = self.deformation.binding.mesh_guard.release()
         _RUNNING.discard(self)
-        if self._saved.mesh is None and guard:  # written meanwhile by a save: put it back too
-            self._saved.mesh = guard["mesh"]
+        if self._saved.mesh is None and kept is not None:  # written meanwhile by a save: put it back too
+            self._saved.mesh = kept
         self.deformation.restore(self._saved)
         return CANCELLED
 
