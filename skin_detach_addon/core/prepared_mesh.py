@@ -1,16 +1,21 @@
 """A detail mesh made ready for simplification and binding.
 
 Raw meshes come with duplicate vertices (split UV seams), repeated or zero-area faces and
-vertices no face uses. :func:`prepare_mesh` welds exact duplicates, keeps only faces that can
-be simplified, and labels connected components, without touching the caller's arrays.
+vertices no face uses. :func:`prepare_mesh` welds exact duplicates, puts the faces in a canonical
+order, keeps only faces that can be simplified, and labels connected components, without
+touching the caller's arrays.
+
+The canonical order makes the build a function of the mesh, not of how its faces happen to be
+stored: Blender numbers the faces of a new UV sphere differently on every call (the same
+triangles, in another order), and the simplification, the normals' sums and every tie after
+them follow the order of the faces.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import (bbox_diagonal, component_labels, face_cross, first_of_each_triple, half_edge_graph,
-                       vertex_normals)
+from .geometry import bbox_diagonal, component_labels, face_cross, half_edge_graph, vertex_normals
 
 #: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal
 #: (of the vertices that faces use).
@@ -71,6 +76,66 @@ def weld_map(points):
     return rank[group], first[first_order]
 
 
+#: Up to this many vertices a face's canonical key (2 n**3 values) fits in one int64.
+ONE_KEY_VERTICES = 1_664_510
+
+
+def canonical_faces(triangles, n_points):
+    """The faces of ``triangles`` (f, 3) over ``n_points`` vertices in a canonical order, as a new
+    (f, 3) int64 array: each row turned so that its smallest vertex id a comes first (orientation
+    kept: (a, b, c)), the rows sorted by a, then by the other two ids in ascending order, then by
+    orientation (b < c first). Two lists of the same faces in any order, each face starting at
+    any corner, give the same array (faces with a repeated id, which the build drops, aside), and
+    repeated faces (the same three ids in any order) end up next to each other.
+
+    Up to :data:`ONE_KEY_VERTICES` vertices each row is one int64 key, sorted as values (no
+    permutation kept) and read back; above, a two-key :func:`numpy.lexsort` orders the rows."""
+    t0, t1, t2 = (np.asarray(triangles[:, k], dtype=np.int64) for k in range(3))
+    a = np.minimum(np.minimum(t0, t1), t2)
+    b = np.where(t0 == a, t1, np.where(t1 == a, t2, t0))  # the corner after a
+    c = t0 + t1 + t2 - a - b
+    del t0, t1, t2
+    lo, hi = np.minimum(b, c), np.maximum(b, c)
+    flipped = (b > c).astype(np.int64)
+    del b, c
+    n = max(int(n_points), 1)
+    out = np.empty((a.size, 3), dtype=np.int64)
+    if n <= ONE_KEY_VERTICES:
+        key = a * n
+        key += lo
+        key *= n
+        key += hi
+        key *= 2
+        key += flipped
+        del a, lo, hi, flipped
+        key.sort()  # values: equal keys are equal rows, so the sort's own order of ties cannot show
+        flipped = (key & 1).astype(bool)
+        key >>= 1
+        hi = key % n
+        key //= n
+        lo = key % n
+        key //= n
+        out[:, 0] = key
+    else:
+        order = np.lexsort(((lo * n + hi) * 2 + flipped, a))
+        out[:, 0] = a[order]
+        lo, hi, flipped = lo[order], hi[order], flipped[order].astype(bool)
+    out[:, 1] = np.where(flipped, hi, lo)
+    out[:, 2] = np.where(flipped, lo, hi)
+    return out
+
+
+def _first_of_repeats(faces):
+    """(q,) sorted indices of the first row of each unordered vertex triple in ``faces`` (f, 3), in
+    :func:`canonical_faces` order (its repeated faces are neighbours)."""
+    if faces.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = np.minimum(faces[:, 1], faces[:, 2]), np.maximum(faces[:, 1], faces[:, 2])
+    repeated = np.zeros(faces.shape[0], dtype=bool)
+    repeated[1:] = (faces[1:, 0] == faces[:-1, 0]) & (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    return np.flatnonzero(~repeated)
+
+
 def _faces_diagonal(points, triangles, diagonal):
     """Bounding-box diagonal of the ``points`` (n, 3) that ``triangles`` (f, 3) use (``diagonal``,
     that of all points, when every point is used): a stray vertex far away does not make every
@@ -85,17 +150,21 @@ def prepare_mesh(points, triangles):
     diagonal = bbox_diagonal(points)
     weld, representatives = weld_map(points)
     if representatives.size == points.shape[0]:
-        unique_points, faces = points, triangles
+        unique_points, faces = points, canonical_faces(triangles, points.shape[0])
     else:
-        unique_points, faces = points[representatives], weld[triangles]
+        unique_points = points[representatives]
+        faces = canonical_faces(weld[triangles], unique_points.shape[0])
 
     distinct = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     cross = face_cross(unique_points, faces)
     area2 = np.einsum("ij,ij->i", cross, cross)
-    keep = distinct & (area2 > (DEGENERATE_AREA * max(_faces_diagonal(unique_points, faces, diagonal), 1e-300) ** 2) ** 2)
+    # Products, not ** (the C library's pow, which may round differently on another CPU).
+    size = max(_faces_diagonal(unique_points, faces, diagonal), 1e-300)
+    least = DEGENERATE_AREA * (size * size)
+    keep = distinct & (area2 > least * least)
     kept = faces if keep.all() else faces[keep]
     # Drop repeated faces (same three vertices in any order): they make non-manifold fans of two.
-    first = np.flatnonzero(keep)[first_of_each_triple(kept)]
+    first = np.flatnonzero(keep)[_first_of_repeats(kept)]
     if first.size == faces.shape[0]:
         kept, kept_cross = faces, cross
     else:
