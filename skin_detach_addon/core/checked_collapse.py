@@ -30,6 +30,9 @@ MAX_VALENCE = 24
 #: Cube-map resolution of the normal histograms: 6 * CUBE_SIDE**2 directions (about 11 degrees).
 CUBE_SIDE = 8
 CUBE_BINS = 6 * CUBE_SIDE * CUBE_SIDE
+#: Dot products of unit vectors within this of zero have their sign decided in a fixed order (the
+#: product's own rounding, under 4e-16, depends on the CPU's BLAS kernel).
+SIGN_MARGIN = 1e-12
 
 
 def cube_directions():
@@ -115,7 +118,8 @@ def _optimal_point(q, pa, pb):
     """Minimiser of quadric ``q`` (10,), or the best of the endpoints and midpoint if singular."""
     a, b, c, d, e, f, g, h, i, _ = q
     det = a * (e * h - f * f) - b * (b * h - f * c) + c * (b * f - e * c)
-    scale = (abs(a) + abs(e) + abs(h)) ** 3
+    scale = abs(a) + abs(e) + abs(h)
+    scale = scale * scale * scale  # not ** 3: the C library's pow may differ per CPU
     if scale > 0 and abs(det) > 1e-12 * scale:
         x = (-d * (e * h - f * f) + b * (g * h - f * i) - c * (g * f - e * i)) / det
         y = (-a * (g * h - i * f) + d * (b * h - f * c) - c * (b * i - g * c)) / det
@@ -177,11 +181,20 @@ class _CollapseState:
     def _violations(self, face_normals, corner_rows, merged):
         """Detail normals with a non-positive dot, per face: ``face_normals`` (r, 3), each face's
         corners (r, 3) as rows of ``self.hist`` (-1 stands for the ``merged`` histogram)."""
-        away = (self.directions @ face_normals.T <= 0.0).astype(np.float64)
+        dots = self.directions @ face_normals.T
+        away = dots <= 0.0
+        # BLAS rounds these per CPU (with or without fused multiply-adds); away from zero the sign is
+        # certain (unit vectors: any order errs by < 4e-16), near it numpy decides in a fixed order.
+        unsure = np.abs(dots) <= SIGN_MARGIN
+        if unsure.any():
+            bins, faces = np.nonzero(unsure)
+            d, n = self.directions[bins], face_normals[faces]
+            away[bins, faces] = d[:, 0] * n[:, 0] + d[:, 1] * n[:, 1] + d[:, 2] * n[:, 2] <= 0.0
+        away = away.astype(np.float64)
         rows, inverse = np.unique(corner_rows, return_inverse=True)
         hist = self.hist[np.maximum(rows, 0)]
         hist[rows < 0] = merged
-        per_vertex = hist @ away
+        per_vertex = hist @ away  # counts times 0/1: whole numbers, exact in any kernel's order
         return per_vertex[inverse.reshape(-1, 3), np.arange(face_normals.shape[0])[:, None]].sum(axis=1)
 
     def try_collapse(self, i, j, point):

@@ -67,7 +67,9 @@ def _seeds(points, components, size):
     key += components
     scaled -= cells
     scaled -= 0.5
-    order = np.argsort(key + np.einsum("ij,ij->i", scaled, scaled) / 0.76)
+    # Stable: a cell's vertices equally near its centre (a regular grid has them) keep the lowest
+    # id on every machine (the default sort breaks ties by the CPU's vector width).
+    order = np.argsort(key + np.einsum("ij,ij->i", scaled, scaled) / 0.76, kind="stable")
     first = np.ones(order.size, dtype=bool)
     first[1:] = key[order[1:]] != key[order[:-1]]
     return order[first]

@@ -67,8 +67,10 @@ def vertex_normals(points, triangles, cross=None):
 
 
 def bbox_diagonal(points):
-    """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3)."""
-    return float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    """Length of the diagonal of the axis-aligned bounding box of ``points`` (n, 3) (numpy's own
+    arithmetic, not BLAS's dot product, whose kernel differs per CPU)."""
+    side = points.max(axis=0) - points.min(axis=0)
+    return float(np.sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]))
 
 
 def vertex_faces(triangles, n_points):

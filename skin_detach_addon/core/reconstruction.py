@@ -13,7 +13,8 @@ import scipy.sparse as sp
 
 from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges
-from .threads import WORKERS, map_blocks
+from . import threads
+from .threads import map_blocks
 
 
 def scaled_normals(points, triangles):
@@ -74,7 +75,7 @@ class Rebuild:
         self.nnz = matrix.nnz
         self.n_proxy = proxy_vertices.shape[0]
         self._stacked = np.empty((3, matrix.shape[1]))
-        blocks = WORKERS if self.n_detail >= PARALLEL_MIN_ROWS else 1
+        blocks = threads.WORKERS if self.n_detail >= PARALLEL_MIN_ROWS else 1
         bounds = np.linspace(0, self.n_detail, blocks + 1).astype(int)
         # Each block holds its rows sorted by their entry count: scipy's product loop mispredicts
         # a branch whenever the row length changes, which made the diffused skin's rows (4 to 16

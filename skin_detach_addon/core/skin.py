@@ -91,7 +91,7 @@ class ProxyFrames:
         # are ill-conditioned; nor does a face collapsed to a point (its longest edge within the
         # distance tolerance of the diagonal): a vertex projected onto its extended plane from
         # any distance gets barycentrics of that distance over the face's size (1e13 seen).
-        self.valid = (self.cross_len > SLIVER * np.maximum(scale, 1e-300)) & (scale > self.tolerance ** 2)
+        self.valid = (self.cross_len > SLIVER * np.maximum(scale, 1e-300)) & (scale > self.tolerance * self.tolerance)
         # The dual basis of (e1, e2) in the face's plane: s = w . dual_s, t = w . dual_t for any w
         # (the normal part drops out), (e2 x N) / |N|^2 and (N x e1) / |N|^2 with N = e1 x e2: two
         # dot products per test, and no cancellation on thin faces (uv^2 - uu vv has it).
