@@ -67,9 +67,10 @@ def detail_ids_of(empty, n=None):
 
 
 def rest_local_of(empty):
-    """(4, 4) float64 rest frame of the empty in the bound object's local space."""
+    """(4, 4) float64 rest frame of the empty in the bound object's local space (a copy: the ID
+    property it is read from may be replaced, by a Rebuild, while the array is still held)."""
     try:
-        frame = np.asarray(value_of(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
+        frame = np.array(value_of(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
     except (TypeError, ValueError):
         frame = np.full((4, 4), np.nan)
     if not np.isfinite(frame).all():
