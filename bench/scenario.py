@@ -75,7 +75,7 @@ class BendScenario:
         ids = np.flatnonzero(groups >= 0)
         targets = np.where((groups[ids] == 1)[:, None], self.move(rest[ids]), rest[ids])
         layout = Layout(groups, [(0, self.anchor_ids), (1, self.handle_ids)])
-        pulls = [surface.drop_rows(detail, groups) for _, detail in layout.held]
+        pulls = surface.drop_rows([detail for _, detail in layout.held], groups)
         return dict(ids=ids, targets=targets, groups=groups, layout=layout, pulls=pulls,
                     motions=[np.eye(4), self.motion()])
 

@@ -43,7 +43,7 @@ def _rig(surface, anchors, handle, motion, strength=1.0):
     targets = np.concatenate([rest[held_anchors], _moved(motion, rest[held_handle])])[order]
     groups = np.full(rest.shape[0], -1, dtype=np.int64)
     groups[held_anchors], groups[held_handle] = 0, 1
-    pulls = [surface.drop_rows(anchors, groups), surface.drop_rows(handle, groups)]
+    pulls = surface.drop_rows([anchors, handle], groups)
     solver = DualLaplacian(rest, surface.proxy_faces, ids[order], pulls=pulls, pull_strength=strength)
     return solver, targets, groups
 
@@ -61,7 +61,7 @@ def test_a_handle_holds_fewer_proxy_vertices_than_its_faces_have_corners(rod):
 
 def test_drop_rows_sum_to_one(rod):
     _, _, surface, anchors, handle = rod
-    rows = surface.drop_rows(handle)
+    rows, = surface.drop_rows([handle])
     assert rows.shape == (handle.size, surface.proxy_vertices.shape[0])
     assert np.allclose(np.asarray(rows.sum(axis=1)).ravel(), 1.0, atol=1e-12)
 
@@ -105,10 +105,10 @@ def test_pulls_are_checked_where_they_enter(rod):
     _, _, surface, anchors, handle = rod
     rest = surface.proxy_vertices
     with pytest.raises(SkinDetachError, match="pulls"):
-        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)[:, :-1]])
+        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows([handle])[0][:, :-1]])
     with pytest.raises(SkinDetachError, match="pulls"):
-        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)], method="paper")
-    solver = DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=[surface.drop_rows(handle)])
+        DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=surface.drop_rows([handle]), method="paper")
+    solver = DualLaplacian(rest, surface.proxy_faces, [0, 1, 2], pulls=surface.drop_rows([handle]))
     with pytest.raises(SkinDetachError, match="pull_motions"):
         solver.solve(rest[:3], pull_motions=[np.eye(4), np.eye(4)])
     with pytest.raises(SkinDetachError, match="pull_motions"):

@@ -244,8 +244,9 @@ def constraints(obj, empties, rest_proxy):
                                       f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
             targets[ids] = moved
             groups[ids] = label
-            if detail_ids_of(empty).size:
-                detail.append((label, detail_ids_of(empty), motion))
+            selected = detail_ids_of(empty)
+            if selected.size:
+                detail.append((label, selected, motion))
         else:
             targets[ids] = rest_proxy[ids]
             groups[ids] = 0

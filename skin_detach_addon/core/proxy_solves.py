@@ -60,8 +60,8 @@ class ProxySolves:
         if key not in self._solvers:
             if len(self._solvers) >= KEPT_SOLVERS:
                 self._solvers.pop(next(iter(self._solvers)))
-            pulls = [] if layout is None else [self.surface.drop_rows(detail, layout.groups)
-                                               for _, detail in layout.held]
+            pulls = [] if layout is None else self.surface.drop_rows([detail for _, detail in layout.held],
+                                                                     layout.groups)
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume, pulls=pulls), []]
         solver, recent = self._solvers[key]

@@ -16,6 +16,7 @@ import scipy.sparse as sp
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges
+from .held_detail import Layout
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix, scaled_normals
@@ -164,10 +165,9 @@ class SkinDetachedSurface:
         """The :class:`.reconstruction.Rebuild` of the diffused skin with the vertices carried by
         one rigid group held (``groups`` (m,) int64 or None) and those ``held`` names (pairs
         (group label, detail ids) or None) bound to faces their group holds; the last two layouts
-        are kept, keyed by the labels and ids themselves (a drag move looks its matrix up without
-        a pass over the detail)."""
-        key = (None if groups is None else groups.tobytes(),
-               None if held is None else tuple((int(label), np.asarray(ids).tobytes()) for label, ids in held))
+        are kept, keyed by :meth:`.held_detail.Layout.key` (a drag move looks its matrix up
+        without a pass over the detail)."""
+        key = None if groups is None else Layout(groups, held or []).key()
         if key not in self._rebuilds:
             if len(self._rebuilds) >= 2:
                 self._rebuilds.pop(next(iter(self._rebuilds)))
@@ -177,15 +177,19 @@ class SkinDetachedSurface:
                                                          self.weld), self.proxy_vertices, self.proxy_faces)
         return self._rebuilds[key]
 
-    def drop_rows(self, ids, groups=None):
-        """(k, m) CSR: row r the drop point of detail vertex ``ids[r]`` (k,) in a rebuild with
-        the rigid ``groups`` (m,) (see :meth:`reconstruct`, without ``held``: where the rebuild
-        would put them from the proxy alone): the proxy-vertex part of its rebuild row, which sums
-        to 1 (what :class:`.pulled_energy.PulledEnergy` pulls)."""
-        ids = as_vertex_ids("ids", ids, self.n_detail)
+    def drop_rows(self, selections, groups=None):
+        """One (k_i, m) CSR per detail ids ``selections[i]`` (k_i,): row r the drop point of
+        detail vertex ``selections[i][r]`` in a rebuild with the rigid ``groups`` (m,) (see
+        :meth:`reconstruct`, without ``held``: where the rebuild would put it from the proxy
+        alone), the proxy-vertex part of its rebuild row, which sums to 1 (what
+        :class:`.pulled_energy.PulledEnergy` pulls). The layout's skin is diffused once for all."""
+        selections = [as_vertex_ids("selections", ids, self.n_detail) for ids in selections]
         skin = self._layout_skin(None if groups is None else np.asarray(groups, dtype=np.int64), None)
         m = self.proxy_vertices.shape[0]
-        return sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
+        ids = np.concatenate(selections) if selections else np.zeros(0, dtype=np.int64)
+        rows = sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
+        bounds = np.cumsum([0] + [part.size for part in selections])
+        return [rows[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
     @property
     def n_detail(self):
