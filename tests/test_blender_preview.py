@@ -105,6 +105,37 @@ def test_a_preview_drag_settles_on_timer_events_and_its_confirm_writes_that_shap
     _same_solve_as_from_rest(obj)
 
 
+def _held_preview_vertices(obj, handle):
+    """(preview ids, detail ids) of the preview vertices that stand for the handle's selected
+    detail vertices, and those detail vertices."""
+    from skin_detach_addon.blender import handles
+    record = binding.open_binding(obj)
+    selected = handles.detail_ids_of(handle)
+    preview_ids = record.preview.held_of([(0, selected)], record.surface.weld)[0][1]
+    detail_of = np.empty(record.surface.skin.case.shape[0], dtype=np.int64)
+    detail_of[record.surface.weld] = np.arange(record.surface.n_detail)
+    return preview_ids, detail_of[record.preview.representatives[preview_ids]]
+
+
+@pytest.mark.parametrize("reopen", [False, True])
+def test_the_preview_holds_what_the_handle_holds_so_confirm_does_not_pop_there(scene, tmp_path, reopen):
+    obj, handle = _rigged(scene)
+    if reopen:  # the preview's representatives are stored with the binding
+        obj, handle = save_and_reopen(tmp_path / "held.blend")
+    preview = preview_of(obj)
+    preview_ids, detail_ids = _held_preview_vertices(obj, handle)
+    assert preview_ids.size >= 10
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=LOW)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    shown = mesh_io.read_positions(preview.data).copy()
+    assert session.event("RET", "PRESS", (130, 80)) == FINISHED
+    confirmed = mesh_io.read_positions(obj.data)
+    # What the preview showed there is what confirm writes there (the same solve, both held
+    # exactly by the handle): no jump at the selection.
+    assert np.abs(confirmed[detail_ids] - api.rest_positions(obj)[detail_ids]).max() > 0.05
+    assert np.abs(confirmed[detail_ids] - shown[preview_ids]).max() <= 1e-5 * _diagonal(obj)
+
+
 def test_preview_cancel_restores_everything_bit_exact(scene):
     obj, handle = _rigged(scene)
     obj.hide_viewport = True  # hidden by the user before the drag: stays hidden

@@ -79,6 +79,18 @@ def test_build_through_the_preview_keeps_the_skin_guarantees(bundled):
     moved = sds.proxy_vertices @ rotation.T + shift
     assert np.abs(preview.surface.reconstruct(moved) - (preview.points @ rotation.T + shift)).max() <= 1e-9 * diag
     assert np.abs(sds.reconstruct(moved) - (points @ rotation.T + shift)).max() <= 1e-9 * diag
+    # Each preview vertex is a detail vertex (its representative); held detail maps onto those.
+    welded = np.empty((sds.skin.case.shape[0], 3))
+    welded[sds.weld] = points
+    assert np.array_equal(welded[preview.representatives], preview.points)
+    top = np.flatnonzero(points[:, 1] > np.quantile(points[:, 1], 0.9))
+    (label, held), = preview.held_of([(3, top)], sds.weld)
+    assert label == 3 and held.size > 0 and np.isin(preview.representatives[held], sds.weld[top]).all()
+    assert np.isin(preview.representatives, sds.weld[top]).sum() == held.size
+    again = Preview.from_arrays(preview.to_arrays())
+    assert np.array_equal(again.representatives, preview.representatives)
+    older = {key: value for key, value in preview.to_arrays().items() if key != "representatives"}
+    assert Preview.from_arrays(older).held_of([(3, top)], sds.weld) == []  # a file of an earlier version
     # Small meshes are left as they are; a preview size must be a sensible count.
     assert SkinDetachedSurface.build(*box(), target_faces=50, preview_vertices=10_000).preview is None
     for bad in (0, 3, 2.5, True, "many"):

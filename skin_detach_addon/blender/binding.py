@@ -56,6 +56,8 @@ class Binding:
         self.solves = ProxySolves(surface)
         self._buffer = np.empty((surface.n_detail, 3), dtype=np.float32)
         self._preview_buffer = None if preview is None else np.empty((preview.points.shape[0], 3), dtype=np.float32)
+        #: (layout key, the preview's held pairs) of the last preview rebuild's layout.
+        self._preview_held = (None, [])
         self.last_step = None
         self._mirrors = {}
         self._own_images = {}
@@ -96,9 +98,18 @@ class Binding:
         return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
                                         held=layout.held or None)
 
-    def rebuild_preview(self, proxy_vertices, groups=None):
-        """(c, 3) float32 preview positions from deformed proxy vertices (m, 3), in a reused buffer."""
-        return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=groups)
+    def rebuild_preview(self, proxy_vertices, layout=None):
+        """(c, 3) float32 preview positions from deformed proxy vertices (m, 3) (``layout`` as for
+        :meth:`rebuild`: the preview holds the vertices that stand for the held detail), in a
+        reused buffer."""
+        if layout is None:
+            return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer)
+        key = layout.key()
+        if self._preview_held[0] != key:
+            self._preview_held = (key, self.preview.held_of(layout.held, self.surface.weld))
+        held = self._preview_held[1]
+        return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
+                                                held=held or None)
 
 
 def has_binding(obj):

@@ -172,7 +172,7 @@ class Deformation:
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
         _, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
-        positions = self.binding.rebuild_preview(result.vertices, layout.groups)
+        positions = self.binding.rebuild_preview(result.vertices, layout)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions)
         mesh_io.write_positions(self.proxy.data, result.vertices)

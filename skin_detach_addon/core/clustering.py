@@ -48,6 +48,7 @@ class Clustered:
     normals     (c, 3) float64  unit vertex normals of the coarse mesh
     cluster     (u,) int64      cluster of every detail vertex
     components  (c,) int64      component label of every cluster (the detail's)
+    representatives (c,) int64  the detail vertex each cluster's point is
     """
 
     points: np.ndarray
@@ -55,6 +56,7 @@ class Clustered:
     normals: np.ndarray
     cluster: np.ndarray
     components: np.ndarray
+    representatives: np.ndarray
 
 
 def _seeds(points, components, size):
@@ -187,4 +189,4 @@ def cluster_mesh(points, triangles, normals, components, graph, area, target_ver
     coarse = np.ascontiguousarray(points[rep])
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     return Clustered(points=coarse, triangles=faces, normals=vertex_normals(coarse, faces), cluster=label,
-                     components=components[rep])
+                     components=components[rep], representatives=rep)

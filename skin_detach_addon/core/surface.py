@@ -53,19 +53,35 @@ class Preview:
     points     (c, 3) float64  rest positions (cluster representatives, see :mod:`.clustering`)
     triangles  (q, 3) int64    faces
     surface    :class:`SkinDetachedSurface` whose detail is this mesh
+    representatives (c,) int64 the welded detail vertex each preview vertex is, or None (a file
+               of an earlier version: the preview then holds no detail of its own)
     """
 
     points: np.ndarray
     triangles: np.ndarray
     surface: "SkinDetachedSurface"
+    representatives: np.ndarray = None
 
     def __post_init__(self):
         if self.surface.triangles is None:
             self.surface.attach_topology(self.triangles)
 
+    def held_of(self, held, weld):
+        """Pairs (group label, preview ids (h',)) of ``held`` (pairs (group label, detail ids (h,)),
+        see :meth:`SkinDetachedSurface.reconstruct`): the preview vertices whose representative
+        is among the pair's detail vertices (``weld`` (n,): the detail's welded ids), so the
+        preview holds what the detail holds; empty without representatives."""
+        if self.representatives is None:
+            return []
+        return [(label, np.flatnonzero(np.isin(self.representatives, weld[np.asarray(ids, dtype=np.int64)])))
+                for label, ids in held]
+
     def to_arrays(self):
         """Dict of plain arrays that :meth:`from_arrays` reads back."""
-        return dict(self.surface.to_arrays(), points=self.points, triangles=self.triangles)
+        arrays = dict(self.surface.to_arrays(), points=self.points, triangles=self.triangles)
+        if self.representatives is not None:
+            arrays["representatives"] = self.representatives
+        return arrays
 
     @classmethod
     def from_arrays(cls, arrays, source="arrays"):
@@ -81,7 +97,15 @@ class Preview:
                                   f"({type(exc).__name__}: {exc}); rebuild the skin") from None
         if topology_fingerprint(points.shape[0], triangles) != surface.fingerprint:
             raise SkinDetachError(f"{source}: expected preview triangles matching its skin, got others; rebuild the skin")
-        return cls(points, triangles, surface)
+        representatives = arrays.get("representatives")
+        if representatives is not None:
+            representatives = np.asarray(representatives).ravel()
+            if (representatives.shape != (surface.n_detail,) or representatives.dtype.kind not in "iu"
+                    or (representatives.size and representatives.min() < 0)):
+                raise SkinDetachError(f"{source} representatives: expected ({surface.n_detail},) detail ids >= 0, got "
+                                      f"{representatives.shape} {representatives.dtype}; rebuild the skin")
+            representatives = representatives.astype(np.int64)
+        return cls(points, triangles, surface, representatives)
 
 
 class SkinDetachedSurface:
@@ -272,7 +296,8 @@ class SkinDetachedSurface:
             c = clustered.points.shape[0]
             preview = Preview(clustered.points, clustered.triangles,
                               cls(proxy_points, proxy_faces, np.arange(c), preview_carrier, preview_skin,
-                                  topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}))
+                                  topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}),
+                              clustered.representatives)
         bound = time.perf_counter()
         with_normal = max(int(mesh.normals.any(axis=1).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
