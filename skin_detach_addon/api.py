@@ -74,7 +74,30 @@ def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above
     if obj.mode == 'EDIT' or obj.data.is_editmode:
         raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
     _write_shown_pose(obj)  # a Rebuild binds the pose the artist sees
-    return skin_rig.build(obj, target_faces, normal_test, preview_above, progress)
+    stats = skin_rig.build(obj, target_faces, normal_test, preview_above, progress)
+    if stats["handles_kept"]:
+        _prepare_after_change(obj)
+    return stats
+
+
+def prepare(obj, preserve_volume=True):
+    """Prepare the layout of ``obj``'s current handles and anchors (which proxy vertices and
+    detail each holds): the factored solver, the rebuild of the mesh and of its preview, the
+    symmetry checks. The first move and the first confirm of a layout then pay none of it (at
+    3 million vertices, seconds). :func:`add_handle`, :func:`add_anchor`, :func:`remove_handle`
+    and a Rebuild call it, and the add-on calls it for every bound mesh in idle time after a file
+    is opened; a script that opens a file and drags may call it first. Nothing is written."""
+    obj = _bound(obj)
+    Deformation(obj, preserve_volume, require_unedited=False).prepare()
+
+
+def _prepare_after_change(obj):
+    """:func:`prepare` after the rig changed; a rig that cannot be solved (its proxy edited, say)
+    is left unprepared: the change itself stands, and the step that needs the rig says what is wrong."""
+    try:
+        prepare(obj)
+    except SkinDetachError:
+        pass
 
 
 def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
@@ -154,6 +177,7 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
                            detail_ids=twin_detail, size=size, group=group or "", mirror=mirror)
         handle_symmetry.pair(empty, twin)
     bpy.context.view_layer.update()  # the new empty's matrix_world is current when this returns
+    _prepare_after_change(obj)
     return empty
 
 
@@ -285,9 +309,12 @@ def handle_vertex_count(empty):
 
 
 def remove_handle(empty):
-    """Delete a handle or anchor empty."""
+    """Delete a handle or anchor empty (and prepare the layout of those left, see :func:`prepare`)."""
     _check_handle(empty)
+    obj = handles.owner(empty)
     handles.remove(empty)
+    if obj is not None and is_bound(obj):
+        _prepare_after_change(obj)
 
 
 def _check_handle(empty):

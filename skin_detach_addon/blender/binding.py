@@ -98,18 +98,30 @@ class Binding:
         return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
                                         held=layout.held or None)
 
+    def prepare(self, layout):
+        """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and
+        its preview, and the stretch, so the first :meth:`rebuild`, :meth:`rebuild_preview` and
+        :meth:`stretch` with it start at once."""
+        if self._stretch is None:
+            self._stretch = SkinStretch(self.surface)
+        self.surface.prepare_layout(layout.groups, layout.held or None)
+        if self.preview is not None:
+            self.preview.surface.prepare_layout(layout.groups, self._preview_held_of(layout) or None)
+
+    def _preview_held_of(self, layout):
+        key = layout.key()
+        if self._preview_held[0] != key:
+            self._preview_held = (key, self.preview.held_of(layout.held, self.surface.weld))
+        return self._preview_held[1]
+
     def rebuild_preview(self, proxy_vertices, layout=None):
         """(c, 3) float32 preview positions from deformed proxy vertices (m, 3) (``layout`` as for
         :meth:`rebuild`: the preview holds the vertices that stand for the held detail), in a
         reused buffer."""
         if layout is None:
             return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer)
-        key = layout.key()
-        if self._preview_held[0] != key:
-            self._preview_held = (key, self.preview.held_of(layout.held, self.surface.weld))
-        held = self._preview_held[1]
         return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
-                                                held=held or None)
+                                                held=self._preview_held_of(layout) or None)
 
 
 def has_binding(obj):

@@ -118,6 +118,21 @@ class Deformation:
         self.solved = (axis, result, layout)
         return axis, result, layout
 
+    def prepare(self):
+        """Prepare what the first solve and rebuild of the handles' layout would otherwise pay: the
+        factored solver, the mesh's and the preview's rebuild, the symmetry checks (the handles
+        are read, nothing is moved or written). Without handles there is nothing to prepare."""
+        empties = self.handles()
+        axis, _ = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
+        if axis:
+            self.binding.mirror_map(axis)
+        ids, _, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        if ids.size == 0:
+            return
+        layout = Layout(groups, [(label, ids_) for label, ids_, _ in detail])
+        self.binding.solves.prepare(ids, self.preserve_volume, layout)
+        self.binding.prepare(layout)
+
     def _rebuild(self, axis, result, layout):
         """The detail of a solve."""
         detail = self.binding.rebuild(result.vertices, layout)

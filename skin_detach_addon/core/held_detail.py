@@ -13,7 +13,8 @@ face its handle holds whole (:func:`held_rows`), so it lands exactly where the h
 the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
 """
 
-from dataclasses import dataclass
+import hashlib
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,12 +38,20 @@ class Layout:
 
     groups: np.ndarray
     held: list
+    _key: bytes = field(default=None, init=False, repr=False, compare=False)
 
     def key(self):
-        """Bytes that differ between layouts (a solver and a rebuild are prepared per layout)."""
-        return self.groups.tobytes() + b"".join(int(label).to_bytes(8, "little", signed=True) +
-                                                np.asarray(ids, dtype=np.int64).tobytes() + b"|"
-                                                for label, ids in self.held)
+        """Bytes that differ between layouts (a solver and a rebuild are prepared per layout): a
+        BLAKE2b digest of the groups and the held pairs, made once per layout (a drag move looks
+        its solver, rebuild and preview up by it)."""
+        if self._key is None:
+            digest = hashlib.blake2b(self.groups.astype(np.int64).tobytes(), digest_size=32)
+            for label, ids in self.held:
+                digest.update(int(label).to_bytes(8, "little", signed=True))
+                digest.update(np.ascontiguousarray(ids, dtype=np.int64).tobytes())
+                digest.update(b"|")
+            self._key = digest.digest()
+        return self._key
 
 
 def proxy_ownership(surface, ids):

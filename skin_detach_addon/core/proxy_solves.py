@@ -56,6 +56,18 @@ class ProxySolves:
         :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
         stops after ``budget_ms`` (None: no limit; ``idle``: see :meth:`DualLaplacian.solve`);
         without it from rest, so the same handles give the same shape whatever was solved before."""
+        key = self.prepare(ids, preserve_volume, layout)
+        solver, recent = self._solvers[key]
+        initial = follow_start(recent, ids, targets) if follow else None
+        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
+                              budget_ms=budget_ms if follow else None, idle=idle and follow,
+                              pull_motions=list(motions) if solver.n_pulls else None)
+        self._solvers[key][1] = [result] + recent[:1]
+        return result
+
+    def prepare(self, ids, preserve_volume, layout=None):
+        """Factor the solver of the constrained proxy ids (c,) with ``layout`` (see :meth:`solve`)
+        unless it is kept already (the first solve of a layout then starts at once); returns its key."""
         key = (ids.tobytes(), bool(preserve_volume), None if layout is None else layout.key())
         if key not in self._solvers:
             if len(self._solvers) >= KEPT_SOLVERS:
@@ -64,13 +76,7 @@ class ProxySolves:
                                                                      layout.groups)
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume, pulls=pulls), []]
-        solver, recent = self._solvers[key]
-        initial = follow_start(recent, ids, targets) if follow else None
-        result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
-                              budget_ms=budget_ms if follow else None, idle=idle and follow,
-                              pull_motions=list(motions) if solver.n_pulls else None)
-        self._solvers[key][1] = [result] + recent[:1]
-        return result
+        return key
 
     def forget_warm_starts(self):
         """Drop every layout's recent results: the next solve of each starts from rest."""

@@ -32,7 +32,7 @@ resolution: 1,529); 6.8 entries per row at 300K against 7.0 for the plain skin.
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import half_edge_graph
+from .geometry import half_edge_graph, segment_ranges
 from .held_detail import held_rows
 from .skin import Skin
 
@@ -68,11 +68,18 @@ class SeamWeights:
         self._free = None
 
     def _within(self, seeds, rings):
-        """(u,) bool: the vertices within ``rings`` rings of the ``seeds`` (u,) bool."""
-        near = seeds.astype(np.float64)
+        """(u,) bool: the vertices within ``rings`` rings of the ``seeds`` (u,) bool (a breadth-first
+        walk over the one-ring matrix's rows: work in proportion to the region, not the mesh)."""
+        near = seeds.copy()
+        front = np.flatnonzero(seeds)
+        indptr, indices = self._average.indptr, self._average.indices
         for _ in range(rings):
-            near = self._average @ near
-        return near > 0.0
+            if not front.size:
+                break
+            reached = indices[segment_ranges(indptr, front)[0]]
+            front = np.unique(reached[~near[reached]])
+            near[front] = True
+        return near
 
     def _diffused(self, rows, keep, held_rows=None):
         """(len(rows), k) CSR: W diffused over the sub-mesh of ``rows`` (sorted ids) with the
@@ -115,11 +122,13 @@ class SeamWeights:
         if groups is None:
             return np.zeros(u, dtype=bool)
         labels = np.asarray(groups)[self._frames.triangles[self._skin.face]]
-        low = np.full(u, np.iinfo(np.int64).max)
-        high = np.full(u, np.iinfo(np.int64).min)
-        np.minimum.at(low, self._skin.vertex, labels.min(axis=1))
-        np.maximum.at(high, self._skin.vertex, labels.max(axis=1))
-        return (low == high) & (low >= 0)
+        counts = np.bincount(self._skin.vertex, minlength=u)
+        present = counts > 0
+        starts = (np.cumsum(counts) - counts)[present]  # the skin's rows are grouped by vertex
+        kept = np.zeros(u, dtype=bool)
+        low = np.minimum.reduceat(labels.min(axis=1), starts) if starts.size else starts
+        kept[present] = (low == (np.maximum.reduceat(labels.max(axis=1), starts) if starts.size else starts)) & (low >= 0)
+        return kept
 
     def held_by(self, groups, labels=None):
         """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin`: the vertices carried by one

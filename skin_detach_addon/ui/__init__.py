@@ -5,7 +5,7 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 import bpy
 
 from .. import api
-from . import live_update, menus, operators, panel, properties, saving
+from . import idle_preparation, live_update, menus, operators, panel, properties, saving
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
 
@@ -15,6 +15,7 @@ def register():
         bpy.utils.register_class(cls)
     properties.register()
     live_update.register()
+    idle_preparation.register()
     saving.register()
     menus.register()
 
@@ -22,6 +23,7 @@ def register():
 def unregister():
     menus.unregister()
     saving.unregister()
+    idle_preparation.unregister()
     live_update.unregister()
     properties.unregister()
     for cls in reversed(CLASSES):

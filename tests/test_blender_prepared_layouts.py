@@ -1,0 +1,91 @@
+"""A handle layout is prepared when the rig changes and after a file is opened, so the first move
+and the first confirm of a layout find its solver and its rebuild ready (at millions of vertices
+they cost seconds); a prepared layout gives the same result as one prepared on first use."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import TopView, import_spot, quad_sphere, save_and_reopen  # noqa: E402
+from skin_detach_addon import api  # noqa: E402
+from skin_detach_addon.blender import binding, mesh_io  # noqa: E402
+from skin_detach_addon.blender.drag_session import FINISHED, DragSession  # noqa: E402
+from skin_detach_addon.ui import idle_preparation  # noqa: E402
+
+
+def _prepared(obj):
+    """(solver keys, the mesh's rebuild keys, the preview's rebuild keys) held by the binding."""
+    record = binding.open_binding(obj)
+    preview = set() if record.preview is None else set(record.preview.surface._rebuilds)
+    return set(record.solves._solvers), set(record.surface._rebuilds), preview
+
+
+def _rigged(obj):
+    rest = mesh_io.read_positions(obj.data)
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < np.quantile(rest[:, 2], 0.15)), mirror="")
+    return api.add_handle(obj, np.flatnonzero(rest[:, 2] > np.quantile(rest[:, 2], 0.85)), mirror="")
+
+
+def test_adding_and_removing_handles_prepares_the_layout_the_next_step_uses(scene):
+    obj = quad_sphere(segments=48, rings=24)
+    api.build(obj, target_faces=300)
+    assert _prepared(obj)[0] == set()
+    handle = _rigged(obj)
+    solvers, rebuilds, _ = _prepared(obj)
+    assert len(solvers) == 2 and len(rebuilds) == 2  # the anchor's layout, then the handle's
+    handle.location.x += 0.5
+    api.deform(obj)
+    assert _prepared(obj)[:2] == (solvers, rebuilds)  # the step found its layout ready
+    rest = mesh_io.read_positions(obj.data)
+    second = api.add_handle(obj, np.flatnonzero(np.abs(rest[:, 2]) < 0.1), mirror="")
+    assert len(_prepared(obj)[0]) == 3
+    api.remove_handle(second)
+    assert len(_prepared(obj)[0]) == 3  # the layout left is the one of before: kept, nothing new
+    before = _prepared(obj)
+    api.deform(obj)
+    assert _prepared(obj)[0] == before[0]
+
+
+def test_a_prepared_layout_gives_bit_for_bit_what_an_unprepared_one_gives(scene):
+    obj = quad_sphere(segments=48, rings=24)
+    api.build(obj, target_faces=300)
+    handle = _rigged(obj)
+    handle.location.x += 0.5
+    handle.rotation_euler.y = 0.4
+    bpy.context.view_layer.update()
+    api.deform(obj)
+    prepared = mesh_io.read_positions(obj.data).copy()
+    record = binding.open_binding(obj)
+    record.solves._solvers.clear()
+    record.surface._rebuilds.clear()
+    api.deform(obj)
+    assert np.array_equal(mesh_io.read_positions(obj.data), prepared)
+
+
+def test_a_rebuild_keeps_the_handles_and_prepares_their_layout(scene):
+    obj = quad_sphere(segments=48, rings=24)
+    api.build(obj, target_faces=300)
+    _rigged(obj)
+    api.build(obj, target_faces=250)
+    solvers, rebuilds, _ = _prepared(obj)
+    assert len(solvers) == 1 and len(rebuilds) == 2  # the free skin of the build, the rig's layout
+
+
+def test_an_opened_file_is_prepared_in_idle_time_and_its_first_drag_uses_it(scene, tmp_path):
+    scene.skin_detach.preview_above = 1000
+    obj = import_spot()
+    api.build(obj, target_faces=300, preview_above=1000)
+    _rigged(obj)
+    obj, handle = save_and_reopen(tmp_path / "prepared.blend")
+    assert obj.name in idle_preparation.queued()
+    assert _prepared(obj) == (set(), set(), set())  # opened: nothing made yet
+    while idle_preparation.prepare_next() is not None:
+        pass
+    assert not idle_preparation.queued()
+    solvers, rebuilds, previews = _prepared(obj)
+    assert len(solvers) == 1 and len(rebuilds) == 1 and len(previews) == 1
+    session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=1000)
+    session.event("MOUSEMOVE", "NOTHING", (130, 80))
+    assert session.event("RET", "PRESS", (130, 80)) == FINISHED
+    assert _prepared(obj) == (solvers, rebuilds, previews)  # the drag and its confirm found it ready
