@@ -86,9 +86,13 @@ class SeamWeights:
         ``keep`` (len(rows),) rows held at their own weights or at ``held_rows`` (u, k)."""
         average = self._average[rows][:, rows] if rows.size < self._average.shape[0] else self._average
         base = self._base[rows] if rows.size < self._base.shape[0] else self._base
+        weights = base
+        if not keep.any():  # the free diffusion (the build's): nothing to hold, no row to reset
+            for _ in range(self.steps):
+                weights = average @ weights
+            return sp.csr_matrix(weights)
         free = sp.diags((~keep).astype(np.float64))
         held = sp.csr_matrix(sp.diags(keep.astype(np.float64)) @ (base if held_rows is None else held_rows[rows]))
-        weights = base
         for _ in range(self.steps):
             weights = free @ (average @ weights) + held
         return sp.csr_matrix(weights)
