@@ -303,3 +303,24 @@ def test_the_panel_draws_over_damaged_stored_figures(rigged, damage):
     lines = _draw_panel()
     assert any(kind == "label" and value.startswith("Detail:") for kind, value in lines)
     assert any(kind == "label" and value.startswith("Build:") for kind, value in lines)
+
+
+@pytest.mark.parametrize("where", ["detail", "preview"])
+def test_a_rebuild_gone_non_finite_writes_nothing_mesh_proxy_or_preview(rigged, monkeypatch, where):
+    # Each array of a step is checked once, before any write (the writes are told so): a NaN in
+    # the detail or the preview must still stop the step with nothing written.
+    obj, handle = rigged
+    record = binding.open_binding(obj)
+    name = "rebuild" if where == "detail" else "rebuild_preview"
+    if where == "preview":
+        api.build(obj, target_faces=300, preview_above=1000)
+        record = binding.open_binding(obj)
+    original = getattr(type(record), name)
+
+    def poisoned(self, *args, **kwargs):
+        out = original(self, *args, **kwargs)
+        out[3] = np.nan
+        return out
+    monkeypatch.setattr(type(record), name, poisoned)
+    handle.location.x += 0.3
+    refused(lambda: api.deform(obj, preview=where == "preview"), "finite")

@@ -14,23 +14,12 @@ from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from ..core.held_detail import Layout
+from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
 from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io
 from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
 
-#: Tolerance of the proxy solve while the mouse moves (the API's DRAG_TOL: a Newton step of at
-#: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
-#: stationary point) ...
-DRAG_TOL = 1e-8
-#: ... and when a result is kept (Apply, live update, confirm, bake).
-SETTLE_TOL = 1e-12
-#: Milliseconds of solve in a drag move: about one Newton iteration at 1,000 proxy faces (its
-#: conjugate gradients stop at the deadline too), so a move costs little more than Blender's own
-#: stack; the next move, or the settle while the mouse rests, continues from where it stopped.
-DRAG_BUDGET_MS = 4.0
-#: Milliseconds of solve in one slice of the settle while the mouse rests (a TIMER event).
-SETTLE_SLICE_MS = 12.0
 
 
 def _hidden_by_user(obj):
@@ -164,12 +153,21 @@ class Deformation:
         return self._report(start, result, self._rebuild(axis, result, layout), True)
 
     def _report(self, start, result, detail, mark, settling=False):
-        """Write, and record the step's figures on the binding (``settling``: a budgeted step of a
-        drag, whose solve goes on while the mouse rests: not converged yet is no failure)."""
+        """Write, and record the step's figures on the binding (see :meth:`_reported`)."""
         self._write(detail, result.vertices, mark)
+        return self._reported(start, result, detail, settling)
+
+    def _reported(self, start, result, positions, settling, preview=False):
+        """The :class:`StepReport` of a step begun at ``start`` (perf_counter seconds) that wrote
+        ``positions``, recorded on the binding (``settling``: a budgeted step of a drag, whose solve
+        goes on while the mouse rests: not converged yet is no failure; ``preview``: it wrote the
+        preview). Every step's report is made here."""
         report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
-                            result.volume_change, detail)
-        self.binding.last_step = dict(report.figures(), settling=settling and not result.converged)
+                            result.volume_change, positions)
+        figures = dict(report.figures(), settling=settling and not result.converged)
+        if preview:
+            figures["preview"] = True
+        self.binding.last_step = figures
         return report
 
     @property
@@ -189,14 +187,10 @@ class Deformation:
         _, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
         positions = self.binding.rebuild_preview(result.vertices, layout)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
-        mesh_io.write_positions(preview.data, positions)
-        mesh_io.write_positions(self.proxy.data, result.vertices)
+        mesh_io.write_positions(preview.data, positions, checked=True)
+        mesh_io.write_positions(self.proxy.data, result.vertices, checked=True)
         self.show_preview(True, preview)
-        report = StepReport(1000 * (time.perf_counter() - start), result.iterations, result.converged,
-                            result.volume_change, positions)
-        self.binding.last_step = dict(report.figures(), preview=True,
-                                      settling=budget_ms is not None and not result.converged)
-        return report
+        return self._reported(start, result, positions, budget_ms is not None, preview=True)
 
     def show_preview(self, shown, preview=None):
         """Show the preview object (``preview``, looked up when not given) and hide the mesh in
@@ -214,7 +208,8 @@ class Deformation:
 
     def _check_writable(self, proxy_positions, targets, positions):
         """Raise, writing nothing, unless the solved proxy and every array to write (``positions``,
-        one per target after the proxy) are finite and no target is in Edit Mode."""
+        one per target after the proxy) are finite and no target is in Edit Mode: the one check of
+        each array of a step (the writes that follow are told they are checked)."""
         if not np.isfinite(proxy_positions).all():
             raise SkinDetachError(f"object {self.obj.name!r}: expected finite proxy positions, the solve gave NaN or "
                                   f"inf (nothing was written); check the handles' transforms")
@@ -232,8 +227,8 @@ class Deformation:
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
         self.binding.mesh_guard.before_write(self.obj.data)
         stretch = self.binding.stretch(proxy_positions) if mark else None
-        mesh_io.write_positions(self.obj.data, detail)
-        mesh_io.write_positions(self.proxy.data, proxy_positions)
+        mesh_io.write_positions(self.obj.data, detail, checked=True)
+        mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
         if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it
             mesh_io.write_point_floats(self.obj.data, mesh_io.STRETCH, stretch)
             if self.obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None:  # Show Stretch is on

@@ -85,15 +85,17 @@ def check_positions(name, positions):
                               f"or infinite coordinates (first: {int(np.flatnonzero(bad)[0])})")
 
 
-def write_positions(mesh, positions):
+def write_positions(mesh, positions, checked=False):
     """Write (n, 3) ``positions`` into ``mesh``: the position attribute, and with shape keys the
     Basis, every other key moved by the same offset so that its offset to the Basis stays.
-    Refuses (writing nothing) rows that are not finite."""
+    Refuses (writing nothing) rows that are not finite, unless the caller ``checked`` them with
+    :func:`check_positions` already (a drag move checks each array once, all before any write)."""
     buffer = np.ascontiguousarray(positions, dtype=np.float32).ravel()
     if buffer.size != 3 * len(mesh.vertices):
         raise SkinDetachError(f"positions: expected {len(mesh.vertices)} rows for mesh {mesh.name!r}, "
                               f"got {buffer.size // 3}")
-    check_positions(f"positions for mesh {mesh.name!r}", buffer.reshape(-1, 3))
+    if not checked:
+        check_positions(f"positions for mesh {mesh.name!r}", buffer.reshape(-1, 3))
     keys = mesh.shape_keys
     if keys is not None:
         basis = keys.reference_key

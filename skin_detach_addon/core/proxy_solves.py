@@ -10,6 +10,18 @@ import numpy as np
 
 from .dual_laplacian import DualLaplacian
 
+#: Tolerance of the proxy solve while the mouse moves (api.DRAG_TOL: a Newton step of at
+#: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
+#: stationary point) ...
+DRAG_TOL = 1e-8
+#: ... and when a result is kept (Apply, live update, confirm, bake).
+SETTLE_TOL = 1e-12
+#: Milliseconds of solve in a drag move: about one Newton iteration at 1,000 proxy faces (its
+#: conjugate gradients stop at the deadline too), so a move costs little more than Blender's own
+#: stack; the next move, or the settle while the mouse rests, continues from where it stopped.
+DRAG_BUDGET_MS = 4.0
+#: Milliseconds of solve in one slice of the settle while the mouse rests (a TIMER event).
+SETTLE_SLICE_MS = 12.0
 #: Iterations a proxy solve may take before it reports that it did not converge.
 MAX_ITERATIONS = 300
 #: Factored solvers kept (one per constraint layout; the oldest goes first).
