@@ -67,9 +67,12 @@ class Binding:
     def stretch(self, proxy_vertices):
         """(n,) float32 the detail's stretch against its rest when the proxy is at
         ``proxy_vertices`` (m, 3) (:class:`.core.stretch.SkinStretch`, made on first use)."""
+        return self._skin_stretch()(proxy_vertices)
+
+    def _skin_stretch(self):
         if self._stretch is None:
             self._stretch = SkinStretch(self.surface)
-        return self._stretch(proxy_vertices)
+        return self._stretch
 
     def mirror_map(self, axis):
         """(n,) mirror twin of every mesh vertex across local ``axis`` ("X", "Y", "Z") at rest,
@@ -102,8 +105,7 @@ class Binding:
         """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and
         its preview, and the stretch, so the first :meth:`rebuild`, :meth:`rebuild_preview` and
         :meth:`stretch` with it start at once."""
-        if self._stretch is None:
-            self._stretch = SkinStretch(self.surface)
+        self._skin_stretch()
         self.surface.prepare_layout(layout.groups, layout.held or None)
         if self.preview is not None:
             self.preview.surface.prepare_layout(layout.groups, self._preview_held_of(layout) or None)

@@ -96,16 +96,22 @@ class Deformation:
         self.kept_symmetric = handle_symmetry.keep_symmetric(self.obj, empties, axis) if axis and asked else []
         if axis and not asked and not handle_symmetry.moves_symmetrically(self.obj, empties, axis):
             axis = ""
-        ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        ids, targets, layout, motions = self._constraints(empties)
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        layout = Layout(groups, [(label, ids_) for label, ids_, _ in detail])
         result = self.binding.solves.solve(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
-                                           layout, [motion for _, _, motion in detail])
+                                           layout, motions)
         #: The last solve's (symmetry axis, result, layout): what :meth:`commit` rebuilds from.
         self.solved = (axis, result, layout)
         return axis, result, layout
+
+    def _constraints(self, empties):
+        """(constrained proxy ids (c,), their targets (c, 3), the :class:`Layout`, the held detail's
+        (4, 4) motions, one per pair of the layout) of the handle and anchor ``empties``."""
+        ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        return ids, targets, Layout(groups, [(label, ids_) for label, ids_, _ in detail]), \
+            [motion for _, _, motion in detail]
 
     def prepare(self):
         """Prepare what the first solve and rebuild of the handles' layout would otherwise pay: the
@@ -115,10 +121,9 @@ class Deformation:
         axis, _ = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
         if axis:
             self.binding.mirror_map(axis)
-        ids, _, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        ids, _, layout, _ = self._constraints(empties)
         if ids.size == 0:
             return
-        layout = Layout(groups, [(label, ids_) for label, ids_, _ in detail])
         self.binding.solves.prepare(ids, self.preserve_volume, layout)
         self.binding.prepare(layout)
 

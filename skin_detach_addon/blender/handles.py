@@ -253,8 +253,9 @@ def constraints(obj, empties, rest_proxy):
             anchored.append(detail_ids_of(empty))
         held[ids] = True
     # One anchor's ids are stored sorted and unique already (a union costs a sort of them per move).
-    anchored = anchored[0] if len(anchored) == 1 else np.unique(np.concatenate(anchored)) if anchored else \
-        np.zeros(0, dtype=np.int64)
+    if len(anchored) > 1:
+        anchored = [np.unique(np.concatenate(anchored))]
+    anchored = anchored[0] if anchored else np.zeros(0, dtype=np.int64)
     if anchored.size:
         detail.insert(0, (0, anchored, np.eye(4)))
     ids = np.flatnonzero(held)

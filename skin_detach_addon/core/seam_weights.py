@@ -128,10 +128,12 @@ class SeamWeights:
         labels = np.asarray(groups)[self._frames.triangles[self._skin.face]]
         counts = np.bincount(self._skin.vertex, minlength=u)
         present = counts > 0
-        starts = (np.cumsum(counts) - counts)[present]  # the skin's rows are grouped by vertex
         kept = np.zeros(u, dtype=bool)
-        low = np.minimum.reduceat(labels.min(axis=1), starts) if starts.size else starts
-        kept[present] = (low == (np.maximum.reduceat(labels.max(axis=1), starts) if starts.size else starts)) & (low >= 0)
+        if not present.any():
+            return kept
+        starts = (np.cumsum(counts) - counts)[present]  # the skin's rows are grouped by vertex
+        low = np.minimum.reduceat(labels.min(axis=1), starts)
+        kept[present] = (low == np.maximum.reduceat(labels.max(axis=1), starts)) & (low >= 0)
         return kept
 
     def held_by(self, groups, labels=None):

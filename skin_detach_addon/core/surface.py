@@ -350,33 +350,31 @@ class SkinDetachedSurface:
         move exactly with their group although some proxy corners they bind to are free (a
         handle's selection: :mod:`.held_detail`); a later pair overrides an earlier one."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
-        groups = self._checked_groups(groups)
+        groups, held = self._checked_layout(groups, held)
         if out is not None and (not isinstance(out, np.ndarray) or out.shape != (self.n_detail, 3)
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        if held is not None and groups is None:
-            raise SkinDetachError("held: expected groups (the rigid group of every proxy vertex) with held detail, got none")
-        return self._rebuild_for(groups, None if held is None else [(label, ids) for label, ids in held])(points, out=out)
+        return self._rebuild_for(groups, held)(points, out=out)
 
     def prepare_layout(self, groups=None, held=None):
         """Prepare the rebuild of a layout (``groups``, ``held`` as for :meth:`reconstruct`) now, so
         that the first :meth:`reconstruct` with it finds its matrix ready (the last two layouts
         prepared or used are kept)."""
-        groups = self._checked_groups(groups)
+        self._rebuild_for(*self._checked_layout(groups, held))
+
+    def _checked_layout(self, groups, held):
+        """(``groups`` as (m,) int64 or None, ``held`` as a list of pairs or None), refused unless
+        one integer label per proxy vertex, and held detail only with groups."""
+        if groups is not None:
+            m = self.proxy_vertices.shape[0]
+            groups = np.asarray(groups)
+            if groups.shape != (m,) or groups.dtype.kind not in "iu":
+                raise SkinDetachError(f"groups: expected ({m},) integer labels, got {groups.shape} {groups.dtype}")
+            groups = groups.astype(np.int64)
         if held is not None and groups is None:
             raise SkinDetachError("held: expected groups (the rigid group of every proxy vertex) with held detail, got none")
-        self._rebuild_for(groups, None if held is None else [(label, ids) for label, ids in held])
-
-    def _checked_groups(self, groups):
-        """``groups`` as (m,) int64, or None; refused unless one integer label per proxy vertex."""
-        if groups is None:
-            return None
-        m = self.proxy_vertices.shape[0]
-        groups = np.asarray(groups)
-        if groups.shape != (m,) or groups.dtype.kind not in "iu":
-            raise SkinDetachError(f"groups: expected ({m},) integer labels, got {groups.shape} {groups.dtype}")
-        return groups.astype(np.int64)
+        return groups, None if held is None else [(label, ids) for label, ids in held]
 
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
