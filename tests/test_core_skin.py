@@ -606,3 +606,20 @@ def test_a_prepared_layout_has_its_float32_rebuild_made_and_rebuilds_the_same(bu
     sds._rebuilds.clear()
     unprepared = sds.reconstruct(bent, out=np.empty((sds.n_detail, 3), dtype=np.float32), groups=groups)
     assert np.array_equal(prepared, unprepared)
+
+
+def test_bound_disagreement_of_case_two_and_loose_vertices_alone_is_that_of_every_vertex(bundled):
+    """bound_disagreement looks at case-2 and loose vertices only: the faces bind_skin gives the
+    others agree with their normals, so every association's dot gives the same answer."""
+    from skin_detach_addon.core.geometry import face_cross, unit_rows, vertex_normals
+    from skin_detach_addon.core.skin import bound_disagreement
+    points, tris = bundled("bunny")  # loose vertices too
+    sds = SkinDetachedSurface.build(points, tris, target_faces=200, normal_test=False)
+    mesh = prepare_mesh(points, tris)
+    normals = vertex_normals(mesh.points, mesh.triangles)
+    skin = sds.skin
+    dots = np.einsum("ij,ij->i", unit_rows(face_cross(sds.proxy_vertices, sds.proxy_faces))[0][skin.face],
+                     normals[skin.vertex])
+    every = np.zeros(normals.shape[0], dtype=bool)
+    every[skin.vertex[dots < 0.0]] = True
+    assert every.any() and np.array_equal(bound_disagreement(skin, normals, sds.proxy_vertices, sds.proxy_faces), every)

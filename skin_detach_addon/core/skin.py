@@ -298,9 +298,14 @@ def check_coefficients(skin, source):
 
 
 def bound_disagreement(skin, normals, proxy_points, proxy_triangles):
-    """(u,) bool: the vertex normal has a negative dot with a proxy face it is bound to."""
+    """(u,) bool: the vertex normal has a negative dot with a proxy face it is bound to, in a skin
+    :func:`bind_skin` made: the faces of case-1 and case-3 vertices agree with their normals
+    (that is how they were chosen), so only case-2 and loose vertices are looked at."""
     face_normal = unit_rows(face_cross(proxy_points, proxy_triangles))[0]
-    dots = np.einsum("ij,ij->i", face_normal[skin.face], normals[skin.vertex])
+    case = skin.case[skin.vertex]
+    rows = np.flatnonzero((case == CASE_TWO) | (case == CASE_LOOSE))
+    vertex = skin.vertex[rows]
+    dots = np.einsum("ij,ij->i", face_normal[skin.face[rows]], normals[vertex])
     bad = np.zeros(normals.shape[0], dtype=bool)
-    bad[skin.vertex[dots < 0.0]] = True
+    bad[vertex[dots < 0.0]] = True
     return bad
