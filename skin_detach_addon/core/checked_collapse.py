@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import unit_rows
+from .geometry import rows_any, unit_rows
 from .simplification import MIN_COMPONENT_FACES, collapse_roots
 
 #: Collapses that turn a face by more than this (cosine of the old/new normal) are flips.
@@ -277,7 +277,7 @@ def collapse_with_normal_test(points, triangles, component, carrier, detail, tar
     m = points.shape[0]
     if quadrics is None:
         quadrics = cluster_quadrics(detail.points, detail.triangles, detail.cross, carrier, m)
-    has_normal = (carrier >= 0) & normals.any(axis=1)
+    has_normal = (carrier >= 0) & rows_any(normals)
     keys = carrier[has_normal] * CUBE_BINS + cube_bin(normals[has_normal])
     histograms = np.bincount(keys, minlength=m * CUBE_BINS).reshape(m, CUBE_BINS).astype(np.float64)
     state = _CollapseState(points, triangles, quadrics, histograms, component)

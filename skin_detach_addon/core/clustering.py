@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from .geometry import column_max, column_min, face_cross, first_of_each_triple, vertex_normals
+from .geometry import column_max, column_min, face_cross, first_of_each_triple, rows_any, vertex_normals
 from .threads import map_blocks
 
 #: A component is only clustered when it keeps at least this many faces afterwards.
@@ -183,7 +183,7 @@ def cluster_mesh(points, triangles, normals, components, graph, area, target_ver
         split = faulty & (np.bincount(label, minlength=rep.size) > 1)
         if repair == REPAIR_ROUNDS or not split.any():
             break
-        touching = np.flatnonzero(split[label][triangles].any(axis=1))
+        touching = np.flatnonzero(rows_any(split[label][triangles]))
         candidates = np.union1d(candidates[spanning], touching)
         label, rep, summed = _split(label, rep, summed, normals, split)
     coarse = np.ascontiguousarray(points[rep])

@@ -79,6 +79,16 @@ def column_min(values):
     return np.array([values[:, k].min() for k in range(values.shape[1])])
 
 
+def rows_any(values):
+    """(r,) bool: the row of ``values`` (r, c) has an entry that is not zero (or False), read one
+    column at a time (numpy's any over axis 1 of a narrow array walks it row by row, five times
+    slower)."""
+    out = values[:, 0] != 0
+    for k in range(1, values.shape[1]):
+        out |= values[:, k] != 0
+    return out
+
+
 def column_max(values):
     """(c,) the largest value of each column of ``values`` (r, c) (see :func:`column_min`)."""
     return np.array([values[:, k].max() for k in range(values.shape[1])])

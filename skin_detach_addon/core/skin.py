@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from .errors import SkinDetachError
 from .threads import map_blocks
-from .geometry import bbox_diagonal, cross_rows, face_cross, segment_ranges, unit_rows, vertex_faces
+from .geometry import bbox_diagonal, cross_rows, face_cross, rows_any, segment_ranges, unit_rows, vertex_faces
 
 #: Barycentric tolerance for "the drop point lies in the triangle".
 CONTAIN_EPS = 1e-9
@@ -154,9 +154,7 @@ def _agrees(frames, normals, vertex, face):
     """Per pair: the face normal has a positive dot with the vertex normal (or it has none)."""
     own = normals[vertex]
     dots = np.einsum("ij,ij->i", frames.normal[face], own)
-    # Column by column: numpy's reductions over the 3 entries of each row walk rows one by one.
-    no_normal = (own[:, 0] == 0.0) & (own[:, 1] == 0.0) & (own[:, 2] == 0.0)
-    return (dots > 0.0) | no_normal
+    return (dots > 0.0) | ~rows_any(own)
 
 
 def _contained(frames, points, normals, vertex, face):
@@ -279,7 +277,7 @@ def bind_skin(points, normals, carrier, proxy_points, proxy_triangles):
     height = distance / np.sqrt(frames.cross_len[face])
     skin = Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=case)
     check_coefficients(skin, "the built skin")
-    return skin, ring_disagree & normals.any(axis=1)
+    return skin, ring_disagree & rows_any(normals)
 
 
 def check_coefficients(skin, source):

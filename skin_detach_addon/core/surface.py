@@ -15,7 +15,7 @@ import scipy.sparse as sp
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
-from .geometry import face_cross, flat_ranges, half_edge_graph
+from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
 from .held_detail import Layout
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
@@ -311,7 +311,7 @@ class SkinDetachedSurface:
                                   topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}),
                               clustered.representatives)
         bound = time.perf_counter()
-        with_normal = max(int(mesh.normals.any(axis=1).sum()), 1)
+        with_normal = max(int(rows_any(mesh.normals).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
         ring_share = ring_disagree.sum() / with_normal
         counts = np.bincount(skin.case, minlength=5)
