@@ -87,7 +87,8 @@ class Rebuild:
         def block(rows):
             matrix = rebuild_matrix(skin, proxy_triangles, self.n_proxy, weld[rows[0]:rows[1]])
             order = np.argsort(np.diff(matrix.indptr), kind="stable")
-            return rows[0] + order, sp.csr_matrix(matrix[order])
+            index = np.int32 if self.n_detail < 2**31 else np.int64  # the detail rows: half of int64's memory
+            return (rows[0] + order).astype(index), sp.csr_matrix(matrix[order])
 
         self._blocks = map_blocks(block, list(zip(bounds[:-1], bounds[1:])))
         self.nnz = sum(rows.nnz for _, rows in self._blocks)

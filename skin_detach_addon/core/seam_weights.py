@@ -174,6 +174,7 @@ class SeamWeights:
         # product is the one the whole matrix's would give) and stacked once the step's input is
         # let go (one copy of the weights less at once).
         weights = base
+        del base  # the first step's input goes with it
         for _ in range(self.steps):
             parts = map_blocks(lambda block, right=weights: block @ right, blocks)
             weights = None
