@@ -69,7 +69,7 @@ def test_a_rebuild_keeps_the_handles_and_prepares_their_layout(scene):
     _rigged(obj)
     api.build(obj, target_faces=250)
     solvers, rebuilds, _ = _prepared(obj)
-    assert len(solvers) == 1 and len(rebuilds) == 2  # the free skin of the build, the rig's layout
+    assert len(solvers) == 1 and len(rebuilds) == 1  # the rig's layout
 
 
 def test_an_opened_file_is_prepared_in_idle_time_and_its_first_drag_uses_it(scene, tmp_path):

@@ -346,7 +346,9 @@ class SkinDetachedSurface:
         del mesh, clustered  # their normals, components and cluster map: not needed for the seams
         surface.attach_topology(triangles, edges)  # the caller's array (validated again, not kept twice)
         del edges  # the seams drop it once made
-        surface._rebuild_for(None)  # the skin diffused over the detail mesh, once
+        # The skin diffused over the whole detail mesh, once: every layout's rebuild starts from it.
+        # (The rebuild of no layout at all, which the add-on never asks for, is made on first use.)
+        surface._seam_weights().skin()
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
