@@ -108,7 +108,10 @@ def half_edge_graph(triangles, n_points):
     """(n, n) CSR graph with an entry (int8 one) for every directed edge (a, b) of a face: both
     directions of an edge two faces share, one for a border edge."""
     index = np.int32 if n_points < 2**31 - 1 else np.int64
-    tail, head = triangles.astype(index).ravel(), triangles[:, [1, 2, 0]].astype(index).ravel()
+    tail = triangles.astype(index).ravel()
+    head = np.empty_like(tail)
+    for corner in range(3):  # each corner's next one, written straight into the index type
+        head[corner::3] = triangles[:, (corner + 1) % 3]
     return sp.coo_matrix((np.ones(tail.size, dtype=np.int8), (tail, head)), shape=(n_points, n_points)).tocsr()
 
 
