@@ -56,11 +56,12 @@ def vertex_normals(points, triangles, cross=None):
         cross = face_cross(points, triangles)
     n = points.shape[0]
     acc = np.zeros((n, 3))
+    corners = [np.ascontiguousarray(triangles[:, corner], dtype=np.intp) for corner in range(3)]  # once, not per axis
 
     def axis_sum(axis):  # bincounts run side by side on the core's threads
         weights = np.ascontiguousarray(cross[:, axis])
-        for corner in range(3):
-            acc[:, axis] += np.bincount(triangles[:, corner], weights=weights, minlength=n)
+        for corner in corners:
+            acc[:, axis] += np.bincount(corner, weights=weights, minlength=n)
 
     map_blocks(axis_sum, [0, 1, 2])
     return unit_rows(acc)[0]
