@@ -13,6 +13,8 @@ from skin_detach_addon.core.geometry import unique_edges
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data"
+#: Meshes the project was not tuned on (bench/data/README.md says where each comes from).
+UNSEEN = ROOT / "bench" / "data"
 
 
 def read_obj(path):
@@ -36,6 +38,15 @@ def read_obj(path):
 def bundled(name):
     """(vertices (n, 3), triangles (f, 3)) of a mesh in tests/data."""
     return read_obj(DATA / f"{name}.obj")
+
+
+def named(name):
+    """(vertices (n, 3), triangles (f, 3)) of a mesh by name: bench/data's (stored as NPZ) or
+    tests/data's (OBJ)."""
+    if (UNSEEN / f"{name}.npz").exists():
+        stored = np.load(UNSEEN / f"{name}.npz")
+        return stored["vertices"].astype(np.float64), stored["triangles"].astype(np.int64)
+    return bundled(name)
 
 
 def subdivide(points, triangles, parts):

@@ -47,7 +47,7 @@ import bpy  # noqa: E402  (first: the bpy module makes mathutils importable)
 from mathutils import Matrix  # noqa: E402
 
 from bench import blender_stack, report  # noqa: E402
-from bench.meshes import blender_mesh, bundled, subdivide, subdivided  # noqa: E402
+from bench.meshes import blender_mesh, named, subdivide, subdivided  # noqa: E402
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
 
@@ -59,9 +59,6 @@ RADIUS_PX = 100.0
 #: Meshes smaller than this are flat-subdivided (4 ways) until they reach it.
 AT_LEAST = 25_000
 
-
-#: Meshes the drag was not tuned on (bench/data/README.md says where each comes from).
-UNSEEN = pathlib.Path(__file__).resolve().parent.parent / "bench" / "data"
 #: Goal name -> (figure of a row, how far past its goal: <= 1 meets it).
 GOALS = {
     "pop": lambda row: row["release_pop"] / 2e-3,
@@ -82,11 +79,7 @@ def failed(row):
 def mesh(name):
     if name == "armadillo-300K":
         return subdivided("armadillo", (6,))
-    if (UNSEEN / f"{name}.npz").exists():
-        stored = np.load(UNSEEN / f"{name}.npz")
-        points, triangles = stored["vertices"].astype(np.float64), stored["triangles"].astype(np.int64)
-    else:
-        points, triangles = bundled(name)
+    points, triangles = named(name)
     while points.shape[0] < AT_LEAST:
         points, triangles = subdivide(points, triangles, 4)
     return points, triangles

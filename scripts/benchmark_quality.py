@@ -34,7 +34,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 
 from bench import report
 from bench.arap import arap_reference
-from bench.meshes import bundled, subdivide
+from bench.meshes import named, subdivide
 from bench.poses import pose_suite
 from bench.quality import bend_quality
 from bench.scenario import bend_scenario
@@ -43,13 +43,13 @@ from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
 from skin_detach_addon.core.seam_weights import SEAM_STEPS
 from skin_detach_addon.core.stretch import SkinStretch
 
-MESHES = "armadillo,cow,spot,homer,alligator,cheburashka"
+MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 
 
 def mesh(name, at_least):
-    """A bundled mesh, flat-subdivided (4 ways) until it has ``at_least`` vertices, positions
-    rounded to float32 as Blender stores them."""
-    points, triangles = bundled(name)
+    """A mesh of tests/data or bench/data (the unseen ones), flat-subdivided (4 ways) until it has
+    ``at_least`` vertices, positions rounded to float32 as Blender stores them."""
+    points, triangles = named(name)
     while points.shape[0] < at_least:
         points, triangles = subdivide(points, triangles, 4)
     return points.astype(np.float32).astype(np.float64), triangles
@@ -199,7 +199,7 @@ def main():
           "| max warm-cold (diag) | settle ms (median) | 180 deg and back (diag) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in [n for n in args.pose_meshes.split(",") if n]:
-        points, triangles = bundled(name)
+        points, triangles = named(name)
         surface = SkinDetachedSurface.build(points, triangles, target_faces=args.faces)
         for method in ("rotated", "paper"):
             row = dict(mesh=name, method=method, **pose_suite(surface, bend_scenario(points), count=args.poses,
