@@ -235,9 +235,7 @@ class Deformation:
         mesh_io.write_positions(self.obj.data, detail, checked=True)
         mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
         if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it
-            mesh_io.write_point_floats(self.obj.data, mesh_io.STRETCH, stretch)
-            if self.obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None:  # Show Stretch is on
-                mesh_io.write_stretch_colors(self.obj.data, stretch)
+            mesh_io.write_stretch(self.obj.data, stretch)
             stored.mark_written(self.obj, detail)
         self.show_preview(False)
 

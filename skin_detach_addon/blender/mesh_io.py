@@ -151,6 +151,14 @@ def write_stretch_colors(mesh, stretch):
     mesh.color_attributes.active_color = attribute
 
 
+def write_stretch(mesh, stretch):
+    """Store (n,) ``stretch`` in the :data:`STRETCH` attribute and, while Show Stretch is on (the
+    :data:`STRETCH_COLORS` attribute exists), paint it too."""
+    write_point_floats(mesh, STRETCH, stretch)
+    if mesh.color_attributes.get(STRETCH_COLORS) is not None:
+        write_stretch_colors(mesh, stretch)
+
+
 def remove_stretch_colors(mesh):
     """Remove the :data:`STRETCH_COLORS` attribute, if there is one."""
     attribute = mesh.color_attributes.get(STRETCH_COLORS)

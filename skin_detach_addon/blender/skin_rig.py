@@ -131,10 +131,7 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     stored.store(obj, surface, positions, proxy, preview)
     # The stretch at rest, 0: the attribute exists from now on, so the first confirm only writes
     # values (adding an attribute to a mesh of millions makes Blender evaluate it anew: 0.3 s at 3M).
-    stretch = np.zeros(positions.shape[0], dtype=np.float32)
-    mesh_io.write_point_floats(obj.data, mesh_io.STRETCH, stretch)
-    if obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None:
-        mesh_io.write_stretch_colors(obj.data, stretch)
+    mesh_io.write_stretch(obj.data, np.zeros(positions.shape[0], dtype=np.float32))
     kept = removed = 0
     centers = {}
     for empty, detail in old:
