@@ -92,3 +92,22 @@ def test_an_opened_file_is_prepared_in_idle_time_and_its_first_drag_uses_it(scen
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
     assert session.event("RET", "PRESS", (130, 80)) == FINISHED
     assert _prepared(obj) == (solvers, rebuilds, previews)  # the drag and its confirm found it ready
+
+
+def test_a_drag_digests_its_layout_once_not_once_per_move(scene):
+    obj = quad_sphere(segments=48, rings=24)
+    api.build(obj, target_faces=300)
+    handle = _rigged(obj)
+    record = binding.open_binding(obj)
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("MOUSEMOVE", "NOTHING", (5, 0))
+    layout = record._layout
+    key = layout.key()
+    for x in (10, 15, 20):
+        session.event("MOUSEMOVE", "NOTHING", (x, 0))
+        assert record._layout is layout and layout.key() is key
+    assert session.event("RET", "PRESS", (20, 0)) == FINISHED
+    rest = mesh_io.read_positions(obj.data)
+    api.add_handle(obj, np.flatnonzero(np.abs(rest[:, 2]) < 0.1), mirror="")
+    api.deform(obj)
+    assert record._layout is not layout and record._layout.key() != key

@@ -125,3 +125,17 @@ def test_the_pulled_energy_derivatives_match_finite_differences(rod):
     x = rest + 0.02 * diagonal(rest) * rng.standard_normal(rest.shape)
     direction, h = rng.standard_normal(rest.shape), 1e-6
     check_energy_derivatives(energy, x, direction, h)
+
+
+def test_a_layout_is_the_same_only_entry_for_entry_and_its_key_follows():
+    from skin_detach_addon.core.held_detail import Layout
+    groups = np.array([-1, 0, 1, 1, -1])
+    layout = Layout(groups, [(0, np.array([3, 4])), (1, np.array([7, 8, 9]))])
+    assert layout.same(groups.copy(), [(0, np.array([3, 4])), (1, np.array([7, 8, 9]))])
+    others = [(groups, [(0, np.array([3, 4])), (1, np.array([7, 8, 10]))]),
+              (groups, [(0, np.array([3, 4])), (2, np.array([7, 8, 9]))]),
+              (groups, [(0, np.array([3, 4]))]),
+              (np.array([-1, 0, 1, -1, -1]), [(0, np.array([3, 4])), (1, np.array([7, 8, 9]))])]
+    for other_groups, other_held in others:
+        assert not layout.same(other_groups, other_held)
+        assert Layout(other_groups, other_held).key() != layout.key()

@@ -13,7 +13,6 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
-from ..core.held_detail import Layout
 from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
 from ..core.symmetry import symmetrize
 from . import binding as stored
@@ -110,7 +109,7 @@ class Deformation:
         """(constrained proxy ids (c,), their targets (c, 3), the :class:`Layout`, the held detail's
         (4, 4) motions, one per pair of the layout) of the handle and anchor ``empties``."""
         ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
-        return ids, targets, Layout(groups, [(label, ids_) for label, ids_, _ in detail]), \
+        return ids, targets, self.binding.layout(groups, [(label, ids_) for label, ids_, _ in detail]), \
             [motion for _, _, motion in detail]
 
     def prepare(self):

@@ -53,6 +53,13 @@ class Layout:
             self._key = digest.digest()
         return self._key
 
+    def same(self, groups, held):
+        """Whether ``groups`` (m,) and ``held`` (pairs (label, detail ids)) are this layout's, entry
+        for entry (a comparison, much cheaper than a new layout's :meth:`key` over every held id)."""
+        return (self.groups is groups or np.array_equal(self.groups, groups)) and len(self.held) == len(held) and all(
+            int(label) == int(other) and (ids is other_ids or np.array_equal(ids, other_ids))
+            for (label, ids), (other, other_ids) in zip(self.held, held))
+
 
 def proxy_ownership(surface, ids):
     """(m,) float: the share of the skin's weight on each proxy vertex that comes from the detail

@@ -144,6 +144,8 @@ class SkinDetachedSurface:
         self._edges = None
         self._seams = None
         self._rebuilds = {}
+        #: The layout of the last rebuild asked for (its key made once, not once per drag move).
+        self._layout = None
         self._seam_steps = SEAM_STEPS
 
     @property
@@ -201,7 +203,12 @@ class SkinDetachedSurface:
         (group label, detail ids) or None) bound to faces their group holds; the last two layouts
         are kept, keyed by :meth:`.held_detail.Layout.key` (a drag move looks its matrix up
         without a pass over the detail)."""
-        key = None if groups is None else Layout(groups, held or []).key()
+        if groups is None:
+            key = None
+        else:
+            if self._layout is None or not self._layout.same(groups, held or []):
+                self._layout = Layout(groups, held or [])
+            key = self._layout.key()
         if key not in self._rebuilds:
             if len(self._rebuilds) >= 2:
                 self._rebuilds.pop(next(iter(self._rebuilds)))
