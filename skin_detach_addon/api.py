@@ -84,7 +84,8 @@ def prepare(obj, preserve_volume=True):
     """Prepare the layout of ``obj``'s current handles and anchors (which proxy vertices and
     detail each holds): the factored solver, the rebuild of the mesh and of its preview, the
     symmetry checks. The first move and the first confirm of a layout then pay none of it (at
-    3 million vertices, seconds). :func:`add_handle`, :func:`add_anchor`, :func:`remove_handle`
+    3 million vertices, seconds); a rig of anchors only has nothing to drag and is not prepared.
+    :func:`add_handle`, :func:`add_anchor`, :func:`remove_handle`
     and a Rebuild call it, and the add-on calls it for every bound mesh in idle time after a file
     is opened; a script that opens a file and drags may call it first. Nothing is written."""
     obj = _bound(obj)

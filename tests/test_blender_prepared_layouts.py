@@ -33,15 +33,15 @@ def test_adding_and_removing_handles_prepares_the_layout_the_next_step_uses(scen
     assert _prepared(obj)[0] == set()
     handle = _rigged(obj)
     solvers, rebuilds, _ = _prepared(obj)
-    assert len(solvers) == 2 and len(rebuilds) == 2  # the anchor's layout, then the handle's
+    assert len(solvers) == 1 and len(rebuilds) == 1  # anchors alone are not prepared: the rig's layout
     handle.location.x += 0.5
     api.deform(obj)
     assert _prepared(obj)[:2] == (solvers, rebuilds)  # the step found its layout ready
     rest = mesh_io.read_positions(obj.data)
     second = api.add_handle(obj, np.flatnonzero(np.abs(rest[:, 2]) < 0.1), mirror="")
-    assert len(_prepared(obj)[0]) == 3
+    assert len(_prepared(obj)[0]) == 2
     api.remove_handle(second)
-    assert len(_prepared(obj)[0]) == 3  # the layout left is the one of before: kept, nothing new
+    assert len(_prepared(obj)[0]) == 2  # the layout left is the one of before: kept, nothing new
     before = _prepared(obj)
     api.deform(obj)
     assert _prepared(obj)[0] == before[0]
@@ -111,3 +111,13 @@ def test_a_drag_digests_its_layout_once_not_once_per_move(scene):
     api.add_handle(obj, np.flatnonzero(np.abs(rest[:, 2]) < 0.1), mirror="")
     api.deform(obj)
     assert record._layout is not layout and record._layout.key() != key
+
+
+def test_anchors_alone_are_not_prepared_and_still_solve_to_rest(scene):
+    obj = quad_sphere(segments=48, rings=24)
+    api.build(obj, target_faces=300)
+    rest = mesh_io.read_positions(obj.data).copy()
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < np.quantile(rest[:, 2], 0.15)), mirror="")
+    assert _prepared(obj) == (set(), set(), set())
+    api.deform(obj)
+    assert np.allclose(mesh_io.read_positions(obj.data), rest, atol=1e-6)

@@ -115,8 +115,12 @@ class Deformation:
     def prepare(self):
         """Prepare what the first solve and rebuild of the handles' layout would otherwise pay: the
         factored solver, the mesh's and the preview's rebuild, the symmetry checks (the handles
-        are read, nothing is moved or written). Without handles there is nothing to prepare."""
+        are read, nothing is moved or written). Without handles there is nothing to prepare:
+        anchors alone hold the mesh at rest and nothing can be dragged (at 300K, preparing the
+        anchors' layout was half of the set-up)."""
         empties = self.handles()
+        if not any(handles.kind_of(empty) == handles.HANDLE for empty in empties):
+            return
         axis, _ = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
         if axis:
             self.binding.mirror_map(axis)
