@@ -86,6 +86,10 @@ def test_the_pull_brings_the_border_along_the_held_detail_lands_exactly_and_ener
     result = solver.solve(targets, max_iter=300, tol=1e-12, pull_motions=[np.eye(4), motion])
     assert result.converged
     assert np.all(np.diff(result.energy) <= 1e-12 * max(result.energy[0], 1.0))
+    state = solver.energy_terms.at(result.vertices)  # the pulled energy's bound: its own at its point, above elsewhere
+    assert solver.energy_terms.bound(state, result.vertices) == pytest.approx(state.energy, rel=1e-9)
+    nudged = result.vertices + 1e-3 * diagonal(points) * np.random.default_rng(2).standard_normal(result.vertices.shape)
+    assert solver.energy_terms.bound(state, nudged) >= solver.energy_terms.energy(nudged) * (1 - 1e-12)
     detail = surface.reconstruct(result.vertices, groups=groups)
     miss = np.linalg.norm(detail[handle] - _moved(motion, points[handle]), axis=1) / diagonal(points)
     # A weaker pull lets the border miss more: the pull is what brings it there.

@@ -34,6 +34,20 @@ def test_gradient_and_hessian_products_match_finite_differences(spot_proxy):
     assert np.abs(bend_rate - volume.hessian_product(x, direction, weights)).max() <= 1e-6 * np.abs(bend_rate).max()
 
 
+def test_the_energy_with_the_last_rotations_kept_bounds_it_from_above(spot_proxy):
+    points, tris = spot_proxy
+    solver = DualLaplacian(points, tris, np.arange(0, points.shape[0], 9))
+    energy, rng = solver.energy_terms, np.random.default_rng(4)
+    x = points + 0.05 * diagonal(points) * rng.standard_normal(points.shape)
+    state = energy.at(x)
+    assert energy.bound(state, x) == pytest.approx(state.energy, rel=1e-12)
+    for size in (1e-4, 1e-2, 0.1):
+        y = x + size * diagonal(points) * rng.standard_normal(points.shape)
+        assert energy.bound(state, y) >= energy.energy(y) * (1 - 1e-12)
+    # At rest with rest's rotations it is zero to rounding, from the residuals (no cancellation).
+    assert energy.bound(energy.at(points), points) <= 1e-20 * energy.scale
+
+
 @pytest.mark.parametrize("preserve_volume", [False, True])
 def test_newton_converges_in_few_iterations_and_the_certificate_holds(spot_proxy, preserve_volume):
     points, tris = spot_proxy

@@ -16,7 +16,9 @@ factor of the energy's quadratic part, held by the caller). CG
 stops at the relative residual :data:`FORCING` or on negative curvature (then the step so far, or
 the preconditioned gradient, is still a descent direction). A backtracking line search on E
 (after restoring the volumes along P^-1 grad V) accepts a step only when E has not risen, by the
-Armijo rule, so E never rises from one iterate to the next.
+Armijo rule, so E never rises from one iterate to the next; it first tries the rule on E with the
+last iterate's rotations kept (an upper bound of E: no rotation fit), and fits them only where
+that bound is not low enough or the next iteration needs them.
 
 Convergence (the certificate): the distance to the stationary point is estimated by the Newton
 step, which at a point where the Hessian is positive definite (no negative curvature met) is the
@@ -53,7 +55,8 @@ BACKTRACKS = 20
 class NewtonResult:
     """points (m, 3); iterations; converged; history (iterations,) largest squared vertex move of
     each accepted step over the squared diagonal; energy (iterations + 1,) E at the start and
-    after every iteration."""
+    after every iteration (or the upper bound of it the line search accepted the step on: E with
+    the rotations of the iterate before; never above the entry before it)."""
 
     points: np.ndarray
     iterations: int
@@ -151,15 +154,20 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             break
         # Backtracking on E from the full step; volumes restored along P^-1 grad V at x.
         direction = tangent.direction(m) if tangent is not None else None
-        length, accepted = 1.0, None
+        length, accepted, accepted_energy, accepted_state = 1.0, None, None, None
         for _ in range(BACKTRACKS):
             trial = x.copy()
             trial[free] += length * step
             if direction is not None:
                 trial = volume.restore(trial, direction)
+            target = state.energy + ARMIJO * length * slope
+            bound = energy.bound(state, trial)  # E with x's rotations kept: at least E(trial)
+            if bound <= target:
+                accepted, accepted_energy = trial, bound
+                break
             trial_state = energy.at(trial)
-            if trial_state.energy <= state.energy + ARMIJO * length * slope:
-                accepted = trial_state
+            if trial_state.energy <= target:
+                accepted, accepted_energy, accepted_state = trial, trial_state.energy, trial_state
                 break
             if proposed * length * length <= tol * 1e-4:
                 break
@@ -168,18 +176,21 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             converged = not negative and proposed <= tol
             iterations -= 1
             break
-        moved = largest_step(accepted.points[free] - x[free], diagonal)
-        x, state = accepted.points, accepted
-        # A Hessian with negative curvature would not factor positive definite: no refresh then.
-        if refresh and lagged is not None and not negative and steps > REFRESH_STEPS:
-            lagged.refresh(state)
+        moved = largest_step(accepted[free] - x[free], diagonal)
+        x = accepted
         history.append(moved)
-        energies.append(state.energy)
-        if not negative and length == 1.0 and moved <= tol:
-            converged = True
-            break
+        energies.append(accepted_energy)
+        converged = not negative and length == 1.0 and moved <= tol
         now = time.perf_counter()
-        if deadline is not None and now + (now - begun) > deadline:  # the next one would end past it
+        # The next one would end past the deadline: stop (before fitting the rotations at x).
+        last = converged or (deadline is not None and now + (now - begun) > deadline)
+        # A Hessian with negative curvature would not factor positive definite: no refresh then.
+        refreshing = refresh and lagged is not None and not negative and steps > REFRESH_STEPS
+        if not last or refreshing:
+            state = accepted_state if accepted_state is not None else energy.at(x)
+        if refreshing:
+            lagged.refresh(state)
+        if last:
             break
     return NewtonResult(x, iterations, converged, history, energies)
 

@@ -90,6 +90,14 @@ class PulledEnergy:
         state.gradient = gradient
         return state
 
+    def _pulled(self, points):
+        return sum(float(np.sum(away * (gram @ away)))
+                   for gram, away in ((gram, points - target) for gram, target in zip(self._grams, self._targets)))
+
+    def bound(self, state, points):
+        """The energy's :meth:`.rotated_energy.RotatedEnergy.bound` with the pull's value added."""
+        return self._energy.bound(state, points) + self._pulled(points)
+
     def energy(self, points):
         return self.at(points).energy
 
