@@ -204,3 +204,13 @@ def test_only_an_idle_solve_makes_the_hessian_factor_the_next_moves_precondition
     settled = solver.solve(targets, initial=start, max_iter=100, tol=1e-12, budget_ms=1e3, idle=True)
     assert settled.converged and not solver._lagged.at_rest
     assert np.abs(settled.vertices - moved.vertices).max() <= 1e-5 * diagonal(points)
+
+
+def test_a_failed_step_is_shortened_to_the_parabola_s_minimiser_within_a_tenth_to_a_half():
+    from skin_detach_addon.core.projected_newton import _shorter
+    slope = -2.0
+    for curvature, expected in ((4.0, 0.25), (1.5, 0.5), (100.0, 0.1)):  # E(a) - E(0) = slope a + c a^2
+        rise = slope * 1.0 + curvature * 1.0
+        assert _shorter(1.0, slope, rise) == pytest.approx(expected)
+    assert _shorter(0.5, slope, slope * 0.5 + 4.0 * 0.25) == pytest.approx(0.25)  # the same parabola from 0.5
+    assert _shorter(1.0, slope, slope - 1.0) == pytest.approx(0.5)  # curving down: halved

@@ -16,7 +16,8 @@ factor of the energy's quadratic part, held by the caller). CG
 stops at the relative residual :data:`FORCING` or on negative curvature (then the step so far, or
 the preconditioned gradient, is still a descent direction). A backtracking line search on E
 (after restoring the volumes along P^-1 grad V) accepts a step only when E has not risen, by the
-Armijo rule, so E never rises from one iterate to the next; it first tries the rule on E with the
+Armijo rule (a failed trial shortened to the minimiser of the parabola through it, within 0.1-0.5
+of it), so E never rises from one iterate to the next; it first tries the rule on E with the
 last iterate's rotations kept (an upper bound of E: no rotation fit), and fits them only where
 that bound is not low enough or the next iteration needs them.
 
@@ -46,7 +47,7 @@ CG_OVERRUN = 2.0
 #: steps than this make a new factor (about 15 CG steps' cost at 1,000 faces and 25 at 5,000: more
 #: than it saves within one settle, so a settle without a drag never makes one).
 REFRESH_STEPS = 4
-#: Armijo's sufficient decrease, and the halvings of the step at most.
+#: Armijo's sufficient decrease, and the shortenings of the step at most.
 ARMIJO = 1e-4
 BACKTRACKS = 20
 
@@ -171,7 +172,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
                 break
             if proposed * length * length <= tol * 1e-4:
                 break
-            length *= 0.5
+            length = _shorter(length, slope, trial_state.energy - state.energy)
         if accepted is None:  # no decrease left to find along the step: x is as good as it gets
             converged = not negative and proposed <= tol
             iterations -= 1
@@ -193,6 +194,16 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
         if last:
             break
     return NewtonResult(x, iterations, converged, history, energies)
+
+
+def _shorter(length, slope, rise):
+    """The next step length of the backtracking after ``length`` failed Armijo's rule: the minimiser
+    of the parabola through E's change ``rise`` there with the ``slope`` of the full step at 0,
+    kept within 0.1 to 0.5 of ``length`` (a step much too long, as after negative curvature,
+    shrinks tenfold a trial instead of twofold)."""
+    excess = rise - slope * length  # > 0: the parabola curves up
+    guess = -slope * length * length / (2.0 * excess) if excess > 0.0 else 0.5 * length
+    return min(max(guess, 0.1 * length), 0.5 * length)
 
 
 def _newton_step(hessian, precondition, gradient, deadline=None, late=None, tol=0.0, diagonal=1.0):
