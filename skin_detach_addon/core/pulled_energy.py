@@ -91,8 +91,12 @@ class PulledEnergy:
         return state
 
     def _pulled(self, points):
-        return sum(float(np.sum(away * (gram @ away)))
-                   for gram, away in ((gram, points - target) for gram, target in zip(self._grams, self._targets)))
+        """The pull's value at ``points`` (m, 3): sum_h (X - Y_h) . G_h (X - Y_h)."""
+        total = 0.0
+        for gram, target in zip(self._grams, self._targets):
+            away = points - target
+            total += float(np.sum(away * (gram @ away)))
+        return total
 
     def bound(self, state, points):
         """The energy's :meth:`.rotated_energy.RotatedEnergy.bound` with the pull's value added."""
