@@ -61,6 +61,13 @@ class Layout:
             for (label, ids), (other, other_ids) in zip(self.held, held))
 
 
+def layout_of(last, groups, held):
+    """``last`` (a :class:`Layout` or None) when ``groups`` and ``held`` are its own entry for entry,
+    else a new Layout of them: a caller that keeps what this returns makes a layout's key once,
+    not once per drag move."""
+    return last if last is not None and last.same(groups, held) else Layout(groups, held)
+
+
 def proxy_ownership(surface, ids):
     """(m,) float: the share of the skin's weight on each proxy vertex that comes from the detail
     vertices ``ids`` (k,) (0 where no detail binds). The skin's weight of an association on a

@@ -45,7 +45,7 @@ class EnergyState:
     def __init__(self, points, energy, gradient, u, v, sigma, rotations):
         self.points, self.energy, self.gradient = points, energy, gradient
         self._u, self._v, self._sigma = u, v, sigma
-        #: (g, 3, 9) the best rotations U V^T, flattened in the layout of :meth:`RotatedEnergy.covariance_rows`.
+        #: (g, 9) the best rotations U V^T, flattened in the layout of :meth:`RotatedEnergy.covariance_rows`.
         self.rotation_rows = rotations.transpose(0, 2, 1).reshape(-1, 9)
         self._twists = None
 
@@ -125,9 +125,8 @@ class RotatedEnergy:
         rotations, u, v, sigma = self._fit.decompose(rows.reshape(self.n_groups, 3, 3).transpose(0, 2, 1))
         kx = self.gram @ points
         energy = float(np.sum(points * kx)) - 2.0 * float(sigma.sum()) + self.scale
-        if energy < EXACT_BELOW * self.scale:  # near a rigid motion of rest: no cancellation, |B X - T(R)|^2
-            residual = self._b @ points - np.einsum("rij,rj->ri", rotations[self._row_group], self._rest_rows)
-            energy = float(np.sum(residual * residual))
+        if energy < EXACT_BELOW * self.scale:  # near a rigid motion of rest: no cancellation
+            energy = self._residual_energy(points, rotations)
         state = EnergyState(points, energy, None, u, v, sigma, rotations)
         state.gradient = 2.0 * (kx - self._pull(state.rotation_rows))
         return state
@@ -141,10 +140,14 @@ class RotatedEnergy:
         value = float(np.sum(points * (self.gram @ points))) - 2.0 * float(
             np.sum(state.rotation_rows * self.covariance_rows(points))) + self.scale
         if value < EXACT_BELOW * self.scale:
-            rotations = state.rotation_rows.reshape(-1, 3, 3).transpose(0, 2, 1)
-            residual = self._b @ points - np.einsum("rij,rj->ri", rotations[self._row_group], self._rest_rows)
-            value = float(np.sum(residual * residual))
+            value = self._residual_energy(points, state.rotation_rows.reshape(-1, 3, 3).transpose(0, 2, 1))
         return value
+
+    def _residual_energy(self, points, rotations):
+        """|B X - T(R)|^2 at ``points`` (m, 3) with ``rotations`` (g, 3, 3): E summed from its
+        residuals, without the short form's cancellation near a rigid motion of rest."""
+        residual = self._b @ points - np.einsum("rij,rj->ri", rotations[self._row_group], self._rest_rows)
+        return float(np.sum(residual * residual))
 
     def energy(self, points):
         """E at ``points`` (m, 3)."""

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
-from .held_detail import Layout
+from .held_detail import layout_of
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
@@ -206,8 +206,7 @@ class SkinDetachedSurface:
         if groups is None:
             key = None
         else:
-            if self._layout is None or not self._layout.same(groups, held or []):
-                self._layout = Layout(groups, held or [])
+            self._layout = layout_of(self._layout, groups, held or [])
             key = self._layout.key()
         if key not in self._rebuilds:
             if len(self._rebuilds) >= 2:
