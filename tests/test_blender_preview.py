@@ -111,7 +111,7 @@ def _held_preview_vertices(obj, handle):
     from skin_detach_addon.blender import handles
     record = binding.open_binding(obj)
     selected = handles.detail_ids_of(handle)
-    preview_ids = record.preview.held_of([(0, selected)], record.surface.weld)[0][1]
+    preview_ids = record.preview.held_of([(0, selected)], record.surface.weld, record.rest)[0][1]
     detail_of = np.empty(record.surface.skin.case.shape[0], dtype=np.int64)
     detail_of[record.surface.weld] = np.arange(record.surface.n_detail)
     return preview_ids, detail_of[record.preview.representatives[preview_ids]]

@@ -1,6 +1,7 @@
 """The geodesic clustering that pre-reduces large meshes and makes their drag preview."""
 
 import numpy as np
+from scipy.spatial import cKDTree
 import pytest
 
 from conftest import diagonal
@@ -84,13 +85,19 @@ def test_build_through_the_preview_keeps_the_skin_guarantees(bundled):
     welded[sds.weld] = points
     assert np.array_equal(welded[preview.representatives], preview.points)
     top = np.flatnonzero(points[:, 1] > np.quantile(points[:, 1], 0.9))
-    (label, held), = preview.held_of([(3, top)], sds.weld)
+    (label, held), = preview.held_of([(3, top)], sds.weld, points)
     assert label == 3 and held.size > 0 and np.isin(preview.representatives[held], sds.weld[top]).all()
     assert np.isin(preview.representatives, sds.weld[top]).sum() == held.size
     again = Preview.from_arrays(preview.to_arrays())
     assert np.array_equal(again.representatives, preview.representatives)
     older = {key: value for key, value in preview.to_arrays().items() if key != "representatives"}
-    assert Preview.from_arrays(older).held_of([(3, top)], sds.weld) == []  # a file of an earlier version
+    # A file of an earlier version (no representatives), or a selection no preview vertex stands
+    # for: the preview vertices nearest the selected ones at rest.
+    (_, nearest), = Preview.from_arrays(older).held_of([(3, top)], sds.weld, points)
+    assert nearest.size and np.array_equal(nearest, np.unique(cKDTree(preview.points).query(points[top])[1]))
+    lone = np.setdiff1d(np.arange(points.shape[0]), np.flatnonzero(np.isin(sds.weld, preview.representatives)))[:2]
+    (_, stand_in), = preview.held_of([(3, lone)], sds.weld, points)
+    assert stand_in.size and np.array_equal(stand_in, np.unique(cKDTree(preview.points).query(points[lone])[1]))
     # Small meshes are left as they are; a preview size must be a sensible count.
     assert SkinDetachedSurface.build(*box(), target_faces=50, preview_vertices=10_000).preview is None
     for bad in (0, 3, 2.5, True, "many"):

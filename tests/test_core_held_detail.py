@@ -143,3 +143,63 @@ def test_a_layout_is_the_same_only_entry_for_entry_and_its_key_follows():
     for other_groups, other_held in others:
         assert not layout.same(other_groups, other_held)
         assert Layout(other_groups, other_held).key() != layout.key()
+
+
+def test_precedence_puts_anchors_last_and_handles_oldest_first():
+    from skin_detach_addon.core.held_detail import precedence
+    # handles and anchors listed oldest first: h0, a1, h2, a3, h4
+    assert precedence([False, True, False, True, False]).tolist() == [0, 2, 4, 1, 3]
+    assert precedence([]).tolist() == []
+
+
+def test_owned_pairs_give_each_vertex_to_the_last_pair_naming_it():
+    from skin_detach_addon.core.held_detail import owned_pairs
+    pairs = owned_pairs([(1, np.array([5, 1, 2, 3])), (2, np.array([3, 4])), (0, np.array([2, 9]))])
+    assert [label for label, _ in pairs] == [1, 2, 0]
+    assert [ids.tolist() for _, ids in pairs] == [[1, 5], [3, 4], [2, 9]]
+    union = np.concatenate([ids for _, ids in pairs])
+    assert np.unique(union).size == union.size  # disjoint
+
+
+def test_place_held_is_exact_under_any_affine_and_gives_rest_back_bit_for_bit():
+    from skin_detach_addon.core.held_detail import place_held
+    rng = np.random.default_rng(4)
+    rest = rng.normal(size=(50, 3)).astype(np.float32)
+    out = np.zeros_like(rest)
+    identity, sheared = np.eye(4), np.eye(4)
+    sheared[:3, :3] = [[2.0, 0.3, 0.0], [0.0, -1.0, 0.0], [0.1, 0.0, 0.5]]  # non-uniform, negative, shear
+    sheared[:3, 3] = [1.0, -2.0, 3.0]
+    place_held(out, rest, [(0, np.arange(10)), (1, np.arange(10, 30))], [identity, sheared])
+    assert np.array_equal(out[:10], rest[:10])
+    want = rest[10:30].astype(np.float64) @ sheared[:3, :3].T + sheared[:3, 3]
+    assert np.abs(out[10:30] - want).max() <= 1e-6 * np.abs(want).max()
+    assert not out[30:].any()  # what no pair names is left alone
+
+
+def test_a_selected_vertex_follows_its_own_group_not_the_one_holding_its_faces(rod):
+    """A small handle right beside the anchors: its proxy corners are the anchors' (anchors win
+    them), yet its vertices follow the handle's motion, and the anchored ones stay put, with the
+    handle's motion any affine map."""
+    from skin_detach_addon.core.held_detail import Layout, place_held
+    points, _, surface, anchors, _ = rod
+    z = points[:, 2]
+    edge = anchors[np.argsort(z[anchors])[-1]]
+    tiny = np.setdiff1d(np.argsort(np.linalg.norm(points - points[edge], axis=1))[:12], anchors)[:2]
+    assert tiny.size == 2
+    m = surface.proxy_vertices.shape[0]
+    groups = np.full(m, -1, dtype=np.int64)
+    groups[held_proxy_vertices(surface, tiny)] = 1
+    groups[held_proxy_vertices(surface, anchors)] = 0  # anchors override
+    layout = Layout(groups, [(1, tiny), (0, anchors)])
+    motion = np.eye(4)
+    motion[:3, :3] = np.diag([1.5, 0.7, -1.0])
+    motion[:3, 3] = [0.4, 0.0, 0.2]
+    held = np.flatnonzero(groups >= 0)
+    proxy = surface.proxy_vertices.copy()
+    proxy[groups == 1] = _moved(motion, proxy[groups == 1])
+    out = surface.reconstruct(proxy, groups=groups, held=layout.held)
+    assert np.abs(out[anchors] - points[anchors]).max() <= 1e-9 * diagonal(points)  # the anchored rows, rebuilt
+    place_held(out, points, layout.owned, [motion, np.eye(4)])
+    assert np.abs(out[tiny] - _moved(motion, points[tiny])).max() <= 1e-9 * diagonal(points)
+    assert np.array_equal(out[anchors], points[anchors])
+    assert held.size

@@ -17,7 +17,7 @@ import numpy as np
 from ..core.errors import SkinDetachError
 from ..core.surface import Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
-from ..core.held_detail import layout_of
+from ..core.held_detail import layout_of, place_held
 from ..core.proxy_solves import ProxySolves
 from ..core.stretch import SkinStretch
 from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
@@ -103,14 +103,17 @@ class Binding:
         self._layout = layout_of(self._layout, groups, held)
         return self._layout
 
-    def rebuild(self, proxy_vertices, layout=None):
+    def rebuild(self, proxy_vertices, layout=None, motions=()):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``layout``: their
-        rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), in a reused
-        buffer (copy it to keep it past the next call)."""
+        rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), every held
+        vertex then placed exactly by its group's (4, 4) motion in ``motions`` (one per pair of
+        ``layout.held``; :func:`.core.held_detail.place_held`), in a reused buffer (copy it to
+        keep it past the next call)."""
         if layout is None:
             return self.surface.reconstruct(proxy_vertices, out=self._buffer)
-        return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
-                                        held=layout.held or None)
+        out = self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
+                                       held=layout.held or None)
+        return place_held(out, self.rest, layout.owned, motions)
 
     def prepare(self, layout):
         """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and
@@ -123,19 +126,23 @@ class Binding:
             self.preview.surface.prepare_layout(layout.groups, self._preview_held_of(layout) or None, float32=True)
 
     def _preview_held_of(self, layout):
+        """The preview's held pairs of ``layout``: (label, preview ids) per pair of its owned detail
+        (:meth:`.core.surface.Preview.held_of`), made once per layout."""
         key = layout.key()
         if self._preview_held[0] != key:
-            self._preview_held = (key, self.preview.held_of(layout.held, self.surface.weld))
+            self._preview_held = (key, self.preview.held_of(layout.owned, self.surface.weld, self.rest))
         return self._preview_held[1]
 
-    def rebuild_preview(self, proxy_vertices, layout=None):
-        """(c, 3) float32 preview positions from deformed proxy vertices (m, 3) (``layout`` as for
-        :meth:`rebuild`: the preview holds the vertices that stand for the held detail), in a
-        reused buffer."""
+    def rebuild_preview(self, proxy_vertices, layout=None, motions=()):
+        """(c, 3) float32 preview positions from deformed proxy vertices (m, 3) (``layout`` and
+        ``motions`` as for :meth:`rebuild`: the preview holds the vertices that stand for the held
+        detail, placed by their group's motion), in a reused buffer."""
         if layout is None:
             return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer)
-        return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
-                                                held=self._preview_held_of(layout) or None)
+        pairs = self._preview_held_of(layout)
+        out = self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
+                                               held=pairs or None)
+        return place_held(out, self.preview.points, pairs, motions)
 
 
 def has_binding(obj):

@@ -84,8 +84,8 @@ class Deformation:
         return handles.handles_of(self.obj, self.proxy)
 
     def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
-        """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`) from the
-        handles' transforms (``follow``, ``budget_ms``, ``idle``: see
+        """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`, the held
+        detail's (4, 4) motions, one per pair of the layout) from the handles' transforms (``follow``, ``budget_ms``, ``idle``: see
         :meth:`.core.proxy_solves.ProxySolves.solve`)."""
         empties = self.handles()
         handle_symmetry.sync_twins(self.obj, empties)
@@ -101,9 +101,9 @@ class Deformation:
                                   f"select vertices and press Add Handle")
         result = self.binding.solves.solve(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
                                            layout, motions)
-        #: The last solve's (symmetry axis, result, layout): what :meth:`commit` rebuilds from.
-        self.solved = (axis, result, layout)
-        return axis, result, layout
+        #: The last solve's (symmetry axis, result, layout, motions): what :meth:`commit` rebuilds from.
+        self.solved = (axis, result, layout, motions)
+        return self.solved
 
     def _constraints(self, empties):
         """(constrained proxy ids (c,), their targets (c, 3), the :class:`Layout`, the held detail's
@@ -130,9 +130,9 @@ class Deformation:
         self.binding.solves.prepare(ids, self.preserve_volume, layout)
         self.binding.prepare(layout)
 
-    def _rebuild(self, axis, result, layout):
-        """The detail of a solve."""
-        detail = self.binding.rebuild(result.vertices, layout)
+    def _rebuild(self, axis, result, layout, motions):
+        """The detail of a solve: every held vertex where its handle's motion puts it."""
+        detail = self.binding.rebuild(result.vertices, layout, motions)
         if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
             detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
         return detail
@@ -142,8 +142,8 @@ class Deformation:
         last solves, within ``budget_ms``) and rebuild without writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        axis, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
-        return result, self._rebuild(axis, result, layout)
+        solved = self._solve_proxy(tol, follow, budget_ms, idle)
+        return solved[1], self._rebuild(*solved)
 
     def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, idle=False):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
@@ -157,8 +157,7 @@ class Deformation:
         """Write the full detail rebuilt from the last solve (no new solve: what a drag showed,
         settled, is what is kept), the proxy, and the written digest; a :class:`StepReport`."""
         start = time.perf_counter()
-        axis, result, layout = self.solved
-        return self._report(start, result, self._rebuild(axis, result, layout), True)
+        return self._report(start, self.solved[1], self._rebuild(*self.solved), True)
 
     def _report(self, start, result, detail, mark, settling=False):
         """Write, and record the step's figures on the binding (see :meth:`_reported`)."""
@@ -192,8 +191,8 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, layout = self._solve_proxy(tol, follow, budget_ms, idle)
-        positions = self.binding.rebuild_preview(result.vertices, layout)
+        _, result, layout, motions = self._solve_proxy(tol, follow, budget_ms, idle)
+        positions = self.binding.rebuild_preview(result.vertices, layout, motions)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions, checked=True)
         mesh_io.write_positions(self.proxy.data, result.vertices, checked=True)

@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
+from ..core.held_detail import precedence
 
 TAG = "_skin_detach_handle"
 #: Handle targets farther than this from the object's origin are refused (float32 stores the mesh).
@@ -223,18 +224,22 @@ def constraints(obj, empties, rest_proxy):
     of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), and the held
     detail: (group label, detail ids (h,), (4, 4) local motion) per group made from detail
     vertices (the anchors' together, motion the identity), from the handle and anchor
-    ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later handle
-    overrides an older one."""
+    ``empties`` of ``obj`` (:func:`handles_of`, oldest first). Where groups share proxy or detail
+    vertices the later one in :func:`.core.held_detail.precedence` wins: the newest handle over
+    older ones, anchors over handles (the held pairs come in that order)."""
     m = rest_proxy.shape[0]
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
     anchored, detail = [], []
-    for label, empty in enumerate(sorted(empties, key=lambda e: kind_of(e) == HANDLE), start=1):
+    kinds = [kind_of(empty) for empty in empties]
+    order = precedence([kind == ANCHOR for kind in kinds])
+    for label, index in enumerate(order, start=1):
+        empty = empties[index]
         ids = proxy_ids_of(empty, m)
         if ids.size == 0:
             raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids, got none; remove it or Rebuild")
-        if kind_of(empty) == HANDLE:
+        if kinds[index] == HANDLE:
             motion = local_motion(obj, empty)
             moved = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
             if not np.isfinite(motion).all() or not np.isfinite(moved).all() or \
@@ -257,6 +262,6 @@ def constraints(obj, empties, rest_proxy):
         anchored = [np.unique(np.concatenate(anchored))]
     anchored = anchored[0] if anchored else np.zeros(0, dtype=np.int64)
     if anchored.size:
-        detail.insert(0, (0, anchored, np.eye(4)))
+        detail.append((0, anchored, np.eye(4)))
     ids = np.flatnonzero(held)
     return ids, targets[ids], groups, detail

@@ -11,6 +11,14 @@ the free proxy around its border towards the handle's motion
 (:class:`.pulled_energy.PulledEnergy`), and the rebuild binds every selected vertex to a proxy
 face its handle holds whole (:func:`held_rows`), so it lands exactly where the handle puts it;
 the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
+
+Which handle or anchor a detail vertex follows, the one rule (:func:`precedence`,
+:meth:`Layout.owned`): a vertex follows the group whose selection names it, never a neighbour's
+group that merely carries its proxy faces; where selections overlap, an anchor wins over every
+handle (anchors never move) and the newest handle over older ones. The same order decides which
+group holds a proxy vertex two of them claim. Every selected vertex is then placed by its group's
+whole affine motion from its rest position (:func:`place_held`): exact under any transform an
+empty can hold (non-uniform or negative scale, shear from parents), whatever the proxy does.
 """
 
 import hashlib
@@ -39,6 +47,7 @@ class Layout:
     groups: np.ndarray
     held: list
     _key: bytes = field(default=None, init=False, repr=False, compare=False)
+    _owned: list = field(default=None, init=False, repr=False, compare=False)
 
     def key(self):
         """Bytes that differ between layouts (a solver and a rebuild are prepared per layout): a
@@ -59,6 +68,51 @@ class Layout:
         return (self.groups is groups or np.array_equal(self.groups, groups)) and len(self.held) == len(held) and all(
             int(label) == int(other) and (ids is other_ids or np.array_equal(ids, other_ids))
             for (label, ids), (other, other_ids) in zip(self.held, held))
+
+
+    @property
+    def owned(self):
+        """The held pairs as (group label, detail ids (h',)) with each detail vertex in the last pair
+        that names it only (:func:`owned_pairs`), made once per layout."""
+        if self._owned is None:
+            self._owned = owned_pairs(self.held)
+        return self._owned
+
+
+def precedence(is_anchor):
+    """(g,) int64 the order in which groups override each other on shared detail and proxy vertices,
+    given ``is_anchor`` (g,) bool of handles and anchors listed oldest first: every handle, oldest
+    first, then every anchor; a later group wins over an earlier one (the newest handle over older
+    handles, any anchor over any handle: anchors never move)."""
+    is_anchor = np.asarray(is_anchor, dtype=bool)
+    return np.concatenate([np.flatnonzero(~is_anchor), np.flatnonzero(is_anchor)])
+
+
+def owned_pairs(held):
+    """``held`` (pairs (group label, detail ids (h,)), later pairs winning) with each id kept in the
+    last pair that names it only: pairs (label, ids (h',) int64 sorted), the same count and order."""
+    held = [(label, np.unique(np.asarray(ids, dtype=np.int64))) for label, ids in held]
+    if len(held) < 2:
+        return held
+    size = max((int(ids[-1]) + 1 for _, ids in held if ids.size), default=0)
+    taken = np.zeros(size, dtype=bool)
+    owned = []
+    for label, ids in reversed(held):
+        owned.append((label, ids[~taken[ids]]))
+        taken[ids] = True
+    return owned[::-1]
+
+
+def place_held(out, rest, pairs, motions):
+    """Write into ``out`` (n, 3) float32 or float64 every held vertex where its group's motion puts
+    it: ``out[ids] = rest[ids] A^T + b`` for each pair (label, ids (h,)) of ``pairs`` and its (4, 4)
+    motion [A b] in ``motions`` (one per pair), from ``rest`` (n, 3) the rest positions, computed in
+    float64. Exact under any affine motion; the identity gives the rest back bit for bit."""
+    for (_, ids), motion in zip(pairs, motions):
+        if ids.size:
+            motion = np.asarray(motion, dtype=np.float64)
+            out[ids] = rest[ids].astype(np.float64) @ motion[:3, :3].T + motion[:3, 3]
+    return out
 
 
 def layout_of(last, groups, held):

@@ -65,8 +65,9 @@ class ProxySolves:
     def solve(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False, layout=None,
               motions=()):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3),
-        the held detail of ``layout`` (a :class:`.held_detail.Layout`) pulled along ``motions``
-        (one (4, 4) per pair of ``layout.held``). With ``follow`` the solve starts from
+        the held detail of ``layout`` (a :class:`.held_detail.Layout`; each vertex by the group that
+        owns it, :attr:`~.held_detail.Layout.owned`) pulled along ``motions`` (one (4, 4) per pair
+        of ``layout.held``). With ``follow`` the solve starts from
         :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
         stops after ``budget_ms`` (None: no limit; ``idle``: see :meth:`DualLaplacian.solve`);
         without it from rest, so the same handles give the same shape whatever was solved before."""
@@ -86,7 +87,7 @@ class ProxySolves:
         if key not in self._solvers:
             if len(self._solvers) >= KEPT_SOLVERS:
                 self._solvers.pop(next(iter(self._solvers)))
-            pulls = [] if layout is None else self.surface.drop_rows([detail for _, detail in layout.held],
+            pulls = [] if layout is None else self.surface.drop_rows([detail for _, detail in layout.owned],
                                                                      layout.groups)
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume, pulls=pulls), []]

@@ -235,27 +235,35 @@ class SeamWeights:
     def kept(self, groups):
         """(u,) bool: every proxy corner the vertex is bound to lies in one rigid group (``groups``
         (m,) labels, -1: none; None: no vertex is held)."""
+        return self.carrier_group(groups) >= 0
+
+    def carrier_group(self, groups):
+        """(u,) int64: the rigid group (``groups`` (m,) labels) holding every proxy corner the vertex
+        is bound to, -1 where its corners lie in no group or in several (or ``groups`` is None)."""
         u = self._u
+        carried = np.full(u, -1, dtype=np.int64)
         if groups is None:
-            return np.zeros(u, dtype=bool)
+            return carried
         labels = np.asarray(groups)[self._frames.triangles[self._skin.face]]
         counts = np.bincount(self._skin.vertex, minlength=u)
         present = counts > 0
-        kept = np.zeros(u, dtype=bool)
         if not present.any():
-            return kept
+            return carried
         starts = (np.cumsum(counts) - counts)[present]  # the skin's rows are grouped by vertex
         low = np.minimum.reduceat(labels.min(axis=1), starts)
-        kept[present] = (low == np.maximum.reduceat(labels.max(axis=1), starts)) & (low >= 0)
-        return kept
+        carried[present] = np.where((low == np.maximum.reduceat(labels.max(axis=1), starts)) & (low >= 0), low, -1)
+        return carried
 
     def held_by(self, groups, labels=None):
         """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin`: the vertices carried by one
-        rigid group (:meth:`kept`) at their own weights, and the vertices ``labels`` (u,) says a
-        group holds (-1: none) bound to a face that group holds whole (:func:`.held_detail.held_rows`)."""
-        keep = self.kept(groups)
+        rigid group (:meth:`carrier_group`) at their own weights, unless ``labels`` (u,) names
+        another group for them (-1: none), and the vertices ``labels`` says a group holds bound to
+        a face that group holds whole (:func:`.held_detail.held_rows`). A selected vertex whose
+        proxy corners all lie in another group's hands follows its own group, not that one."""
         if labels is None or groups is None:
-            return keep, None
+            return self.kept(groups), None
+        carried = self.carrier_group(groups)
+        keep = (carried >= 0) & ((labels < 0) | (labels == carried))
         rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest_of,
                          np.asarray(groups), np.where(keep, -1, labels))
         replaced = np.diff(rows.indptr) > 0

@@ -12,11 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from .clustering import cluster_mesh
 from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
-from .held_detail import layout_of
+from .held_detail import layout_of, owned_pairs
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import Rebuild, rebuild_matrix
@@ -72,15 +73,24 @@ class Preview:
         if self.surface.triangles is None:
             self.surface.attach_topology(self.triangles)
 
-    def held_of(self, held, weld):
+    def held_of(self, held, weld, rest):
         """Pairs (group label, preview ids (h',)) of ``held`` (pairs (group label, detail ids (h,)),
-        see :meth:`SkinDetachedSurface.reconstruct`): the preview vertices whose representative
-        is among the pair's detail vertices (``weld`` (n,): the detail's welded ids), so the
-        preview holds what the detail holds; empty without representatives."""
-        if self.representatives is None:
-            return []
-        return [(label, np.flatnonzero(np.isin(self.representatives, weld[np.asarray(ids, dtype=np.int64)])))
-                for label, ids in held]
+        see :meth:`SkinDetachedSurface.reconstruct`), so the preview holds what the detail holds:
+        the preview vertices whose representative is among the pair's detail vertices (``weld``
+        (n,): the detail's welded ids) or, for a selection with no representative (a few vertices;
+        a file without representatives), the preview vertex nearest each of its vertices at rest
+        (``rest`` (n, 3)); a later pair wins a preview vertex two pairs claim."""
+        pairs, tree = [], None
+        for label, ids in held:
+            ids = np.asarray(ids, dtype=np.int64)
+            mine = np.zeros(0, dtype=np.int64)
+            if self.representatives is not None and ids.size:
+                mine = np.flatnonzero(np.isin(self.representatives, weld[ids]))
+            if not mine.size and ids.size:
+                tree = tree if tree is not None else cKDTree(self.points)
+                mine = np.unique(tree.query(np.asarray(rest[ids], dtype=np.float64))[1])
+            pairs.append((label, mine))
+        return owned_pairs(pairs)
 
     def to_arrays(self):
         """Dict of plain arrays that :meth:`from_arrays` reads back."""
@@ -223,7 +233,8 @@ class SkinDetachedSurface:
         alone), the proxy-vertex part of its rebuild row, which sums to 1 (what
         :class:`.pulled_energy.PulledEnergy` pulls). The layout's skin is diffused once for all,
         over the selections' neighbourhood only (:meth:`.seam_weights.SeamWeights.skin_of`)."""
-        selections = [as_vertex_ids("selections", ids, self.n_detail) for ids in selections]
+        selections = [as_vertex_ids("selections", ids, self.n_detail) if np.size(ids) else np.zeros(0, dtype=np.int64)
+                      for ids in selections]  # a selection a later group took whole pulls nothing
         m = self.proxy_vertices.shape[0]
         ids = np.concatenate(selections) if selections else np.zeros(0, dtype=np.int64)
         seams = self._seam_weights()
