@@ -320,3 +320,27 @@ def test_a_save_during_a_preview_drag_then_cancel_gives_the_mesh_back(scene, tmp
     assert np.array_equal(after[0], before[0]) and np.array_equal(after[1], before[1]) and after[3] == before[3]
     Deformation(obj)                                          # not "edited since": every operator works
     assert not obj.hide_viewport
+
+
+def test_a_handle_no_preview_vertex_stands_for_drags_in_preview_and_lands_exactly(scene):
+    """A handle of two vertices that are not preview vertices (most small selections on a large
+    mesh): the preview holds the preview vertices nearest them, so preview deforms, drags and the
+    confirm work, and the mesh's two vertices land where the handle puts them."""
+    obj, _ = _rigged(scene)
+    record = binding.open_binding(obj)
+    rest = api.rest_positions(obj).astype(np.float64)
+    standing = np.isin(record.surface.weld, record.preview.representatives)
+    lone = np.flatnonzero(~standing)[np.argsort(rest[~standing, 1])[-2:]]
+    handle = api.add_handle(obj, lone)
+    handle.location.x += 0.05 * _diagonal(obj)
+    preview = preview_of(obj)
+    before = mesh_io.read_positions(preview.data).copy()
+    assert api.deform(obj, preview=True)["preview"]
+    moved = np.linalg.norm(mesh_io.read_positions(preview.data) - before, axis=1)
+    nearest = np.argmin(np.linalg.norm(record.preview.points[:, None] - rest[lone][None], axis=2), axis=0)
+    assert np.allclose(moved[nearest], 0.05 * _diagonal(obj), rtol=1e-4)
+    api.deform(obj)
+    motion = np.array(obj.matrix_world.inverted() @ handle.matrix_world) @ np.linalg.inv(
+        np.array(handle["_skin_detach_handle"]["rest_local"]).reshape(4, 4))
+    want = rest[lone] @ motion[:3, :3].T + motion[:3, 3]
+    assert np.abs(mesh_io.read_positions(obj.data)[lone] - want).max() <= 1e-5 * _diagonal(obj)

@@ -199,7 +199,8 @@ class SkinDetachedSurface:
         -1 where none; a later pair overrides an earlier one."""
         labels = np.full(self.skin.case.shape[0], -1, dtype=np.int64)
         for label, ids in held:
-            labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
+            if np.size(ids):  # a pair a later one took whole holds nothing
+                labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
         return labels
 
     def _layout_skin(self, groups, held):
