@@ -10,7 +10,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
@@ -267,10 +266,10 @@ class Deformation:
         last wrote it (Apply Rotation/Scale): the rest shape would land turned or resized."""
         self._check_no_applied_transform()
         empties = self.handles()
-        frames = [handles.rest_local_of(empty) for empty in empties]  # all checked before anything moves
+        for empty in empties:  # all checked before anything moves
+            handles.rest_local_of(empty)
         self._write(self.binding.rest, self.binding.surface.proxy_vertices)
-        for empty, frame in zip(empties, frames):
-            empty.matrix_basis = Matrix(frame.tolist())
+        handles.place_at_rest(self.obj, empties)
         self.binding.solves.forget_warm_starts()
 
     def _check_no_applied_transform(self):

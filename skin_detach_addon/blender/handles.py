@@ -81,8 +81,9 @@ def rest_local_of(empty):
 
 
 def handles_of(obj, proxy=None):
-    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices)."""
-    pool = proxy.children if proxy is not None else _all_objects()
+    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices; see
+    :func:`.core.held_detail.precedence`), also those parented to another handle's empty."""
+    pool = proxy.children_recursive if proxy is not None else _all_objects()
     found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
     return sorted(found, key=lambda o: ages[o.name])
@@ -148,9 +149,7 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
     empty.empty_display_size = size
     empty.hide_render = True
     proxy.users_collection[0].objects.link(empty)
-    empty.parent = proxy
-    empty.matrix_parent_inverse = Matrix.Identity(4)
-    empty.matrix_basis = Matrix.Translation(now_centroid.tolist())
+    _parent_in_world(obj, empty, proxy, now_centroid)
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
     serial = next_serial(handles_of(obj, proxy))
@@ -166,6 +165,72 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
         "pivot": PIVOT,
     }
     return empty
+
+
+def _chain_world(obj, proxy):
+    """(4, 4) the proxy's world matrix from its owner's (the proxy is the mesh object's child): a
+    proxy made a moment ago has no evaluated matrix_world yet."""
+    return np.array(obj.matrix_world, dtype=np.float64) @ np.array(proxy.matrix_parent_inverse, dtype=np.float64) \
+        @ np.array(proxy.matrix_basis, dtype=np.float64)
+
+
+def _parent_in_world(obj, empty, proxy, centre):
+    """Parent ``empty`` to ``proxy`` at ``centre`` (3,) in the bound object's local space. Where the
+    object's world matrix scales its axes alike (the usual case) the empty's transform is that local
+    frame (identity parent inverse: ``handle.location`` is in the object's local space). Under a
+    non-uniform scale (the object's own or a parent's) a world rotation of that frame, an R in a
+    drag, is a sheared matrix Blender cannot store (it stored a 3.5 times stretch for R 90): there
+    the proxy's world matrix is the parent inverse and the empty's transform its world transform,
+    which a rotation keeps a rotation and scale. Where even that is sheared (a rotated child of a
+    non-uniformly scaled parent) the local frame stays."""
+    chain = _chain_world(obj, proxy)
+    frame = np.eye(4)
+    frame[:3, 3] = centre
+    empty.parent = proxy
+    empty.matrix_parent_inverse = Matrix.Identity(4)
+    empty.matrix_basis = Matrix(frame.tolist())
+    gram = chain[:3, :3].T @ chain[:3, :3]
+    if np.abs(gram - np.eye(3) * np.trace(gram) / 3.0).max() <= 1e-6 * np.trace(gram):
+        return  # a similarity: rotations in the world are rotations in the local frame
+    wanted = chain @ frame
+    empty.matrix_parent_inverse = Matrix(np.linalg.inv(chain).tolist())
+    empty.matrix_basis = Matrix(wanted.tolist())
+    # Blender keeps a transform as float32 location, rotation and scale: a shear shows as an
+    # error of the order of the matrix itself, float32 rounding as one of 1e-7 of it.
+    if np.abs(np.array(empty.matrix_basis) - wanted).max() > 1e-5 * max(1.0, float(np.abs(wanted).max())):
+        empty.matrix_parent_inverse = Matrix.Identity(4)
+        empty.matrix_basis = Matrix(frame.tolist())
+
+
+def obj_of_proxy(proxy):
+    """The bound mesh object a proxy belongs to (its parent)."""
+    return proxy.parent
+
+
+def place_at_rest(obj, empties):
+    """Put every handle and anchor of ``empties`` back on its rest frame, parents first (a handle
+    parented to another handle's empty is placed once its parent is): its world matrix becomes
+    ``obj``'s world matrix times its rest frame, whatever its parent and parent inverse."""
+    import bpy
+    frames = {empty.name: rest_local_of(empty) for empty in empties}  # all checked before anything moves
+    world = np.array(obj.matrix_world, dtype=np.float64)
+    pending = list(empties)
+    while pending:
+        names = {e.name for e in pending}
+        level = [e for e in pending if e.parent is None or e.parent.name not in names]
+        for empty in level:
+            parent = empty.parent
+            if parent is None:
+                above = np.eye(4)
+            elif not is_handle(parent) and parent.parent == obj:  # the proxy
+                above = _chain_world(obj, parent)
+            else:
+                above = np.array(parent.matrix_world, dtype=np.float64)
+            above = above @ np.array(empty.matrix_parent_inverse, dtype=np.float64)
+            empty.matrix_basis = Matrix((np.linalg.solve(above, world @ frames[empty.name])).tolist())
+        pending = [e for e in pending if e not in level]
+        if pending:
+            bpy.context.view_layer.update()  # the placed parents' world matrices, for their children
 
 
 def group_of(empty):
@@ -189,9 +254,7 @@ def remove(empty):
 def rebind(empty, proxy, proxy_ids, rest_centroid):
     """After a Rebuild: new ``proxy_ids`` and rest frame at ``rest_centroid`` (3,), the selection's
     median point at rest, the empty back at rest on the new proxy."""
-    empty.parent = proxy
-    empty.matrix_parent_inverse = Matrix.Identity(4)
-    empty.matrix_basis = Matrix.Translation(rest_centroid.tolist())
+    _parent_in_world(obj_of_proxy(proxy), empty, proxy, rest_centroid)
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
     props = empty[TAG]
