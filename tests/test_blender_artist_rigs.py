@@ -376,3 +376,27 @@ def test_overlapping_weighted_groups_along_a_limb_the_newer_wins(scene, armadill
     api.deform(obj)
     assert held_errors(obj, rest, made)[1]["vertices"] == parts["upper arm"].size
     assert_held(obj, rest, made)
+
+
+@pytest.mark.parametrize("keys", [(), ("R", "THREE", "ZERO")], ids=["G", "G then R 30"])
+def test_hand_parented_to_the_forearm_follows_a_drag_of_the_forearm(scene, armadillo, keys):
+    """The forearm's empty dragged (a DragSession, Blender's depsgraph evaluated after every event
+    as the window does), the hand's empty parented to it: after the confirm the hand's selection
+    is where the hand empty's world transform puts it."""
+    obj, rest, made = limb_rig(armadillo)
+    forearm, hand = made[2].empty, made[3].empty
+    parent_keeping_transform(hand, forearm, "Ctrl+P Object (Keep Transform)")
+    view = TopView(diagonal(rest) / 1000.0)
+    centre = np.array(view.to_screen(forearm.matrix_world.to_translation()))
+    session = DragSession(obj, forearm, view, tuple(centre))
+    mouse = tuple(centre)
+    for k in range(1, 11):
+        mouse = tuple(centre + np.array((7.0, 5.0)) * k)
+        session.event("MOUSEMOVE", "NOTHING", mouse)
+        bpy.context.view_layer.update()
+    for key in keys:
+        session.event(key, "PRESS", mouse)
+        bpy.context.view_layer.update()
+    assert session.event("RET", "PRESS", mouse) == FINISHED
+    bpy.context.view_layer.update()
+    assert_held(obj, rest, made)
