@@ -2,6 +2,8 @@
 
     python scripts/benchmark_quality.py [--meshes armadillo,cow,spot,...] [--at-least 25000] [--poses 300]
                                         [--pose-meshes armadillo,spot,cow] [--faces 1000] [--json PATH]
+    python scripts/benchmark_quality.py --rigs [armadillo,armadillo-300K] [--rig-faces 300,1000]
+                                        [--face-handles 48] [--face-drags 4] [--moves 30] [--json PATH]
 
 Pose suite (bench/poses.py): random handle poses (axis random, up to 90 degrees, shift up to 10 %
 of the diagonal), each solved warm (from the previous pose, as dragging does) and cold at
@@ -21,6 +23,25 @@ paper's iteration; beside Blender's own stack (Decimate
 to our proxy's face count + Hook + Laplacian Deform + Surface Deform, where the bpy module is
 there and Surface Deform binds) and full-resolution ARAP (libigl, 20 iterations, dev-only).
 Totals over the meshes close the table.
+
+Rigs (``--rigs``, in place of the above; the bpy module; issue 43): the rigs artists build, on
+each mesh and proxy size (``--rig-faces``: a coarse proxy puts more of a selection's proxy faces
+in its neighbours'; ``armadillo-300K``: armadillo.obj after one 6-way flat subdivision, as
+benchmark_scale.py and benchmark_drag.py make it), each on a fresh build, every drag a
+DragSession as the modal operator drives it (a view along the mesh's shortest axis, one pixel a
+thousandth of the diagonal; each mouse move timed with Blender's depsgraph update, then Enter):
+a limb (bench/rigs.py: three adjacent bands from the tip of the raised arm, upper arm, forearm
+and hand, each a handle, and a shoulder anchor past a free band), each handle dragged in turn
+(G by 10 % of the diagonal, then R 30 typed); the same limb with the hand's empty parented to
+the forearm's (Ctrl+P, Keep Transform), the forearm dragged (G, then R 30); two painted vertex
+groups sharing the forearm (weights fading from 1 to 0.2, a handle from each, the lower one
+newer), each dragged; a face rig: the feet anchored and ``--face-handles`` small disjoint
+selections spread over the head (each Add Handle, api.add_handle with its layout prepared,
+timed), ``--face-drags`` of them dragged by 3 % of the diagonal. After every confirm, each
+handle's off (the largest distance of a vertex it owns, the newest selection containing it, from
+where its empty's motion in the object's local space puts it, over the rest diagonal) and each
+anchor's motion (bench/rigs.py held_errors); per rig the worst of them over its confirms, the
+move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (RIG_GOALS).
 """
 
 import argparse
@@ -44,6 +65,10 @@ from skin_detach_addon.core.seam_weights import SEAM_STEPS
 from skin_detach_addon.core.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
+RIG_MESHES = "armadillo,armadillo-300K"
+#: Goal name -> (figure of a rigs row, the goal it must not pass); a figure the row lacks is not judged.
+RIG_GOALS = {"off": ("worst_off", 1e-5), "anchor": ("worst_anchor", 1e-5), "Add Handle": ("add_handle_s_max", 0.5),
+             "move": ("move_ms_median", 16.0), "confirm": ("confirm_ms_max", 150.0)}
 
 
 def mesh(name, at_least):
@@ -173,6 +198,209 @@ def through_api(name, points, triangles, scenario, faces):
                 stretch=api.stretch(obj))
 
 
+def rig_mesh(name):
+    """(points (n, 3) rounded to float32, triangles) of ``name``: a mesh of tests/data or
+    bench/data as it is, or "NAME-SIZE" (a size of bench.meshes.SIZES) flat-subdivided to it."""
+    from bench.meshes import SIZES, subdivided
+    stem, _, size = name.rpartition("-")
+    points, triangles = subdivided(stem, SIZES[size]) if stem and size in SIZES else named(name)
+    return points.astype(np.float32).astype(np.float64), triangles
+
+
+class RigRun:
+    """One rig on a fresh build of a mesh: its handles as made (bench.rigs.Held, oldest first),
+    the drags' move and confirm times and the worst held errors after each confirm."""
+
+    def __init__(self, name, points, triangles, faces):
+        import bpy
+
+        from bench.meshes import blender_mesh
+        from bench.views import AxisView
+        from skin_detach_addon import api
+        bpy.ops.wm.read_homefile(use_empty=True)
+        self.obj = blender_mesh(name, points, triangles)
+        self.proxy_faces = int(api.build(self.obj, target_faces=faces)["proxy_faces"])
+        self.rest, self.made, self.moves, self.confirms = points, [], [], []
+        self.worst = {}
+        axis = np.zeros(3)
+        axis[int(np.argmin(np.ptp(points, axis=0)))] = 1.0
+        self.view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
+
+    def add(self, kind, ids=None, group=None):
+        from bench.rigs import make
+        return make(self.obj, kind, ids, group, self.made)
+
+    def drag(self, held, pixels, moves, keys=()):
+        """Drag ``held``'s empty: ``moves`` mouse moves (none: ``pixels`` is not used) to ``pixels`` (2,)
+        from its centre on screen, then the key presses ``keys`` (typed input), then Enter; the held
+        errors after it."""
+        import bpy
+
+        from skin_detach_addon import api
+        centre = np.array(self.view.to_screen(held.empty.matrix_world.to_translation()))
+        session = api.DragSession(self.obj, held.empty, self.view, tuple(centre))
+        mouse = tuple(centre)
+        for k in range(1, moves + 1):
+            mouse = tuple(centre + np.asarray(pixels, dtype=float) * k / moves)
+            start = time.perf_counter()
+            session.event("MOUSEMOVE", "NOTHING", mouse)
+            bpy.context.view_layer.update()
+            self.moves.append(1000 * (time.perf_counter() - start))
+        for key in keys:  # Blender evaluates the depsgraph after each event (a child empty follows its parent)
+            session.event(key, "PRESS", mouse)
+            bpy.context.view_layer.update()
+        start = time.perf_counter()
+        session.event("RET", "PRESS", mouse)
+        bpy.context.view_layer.update()
+        self.confirms.append(1000 * (time.perf_counter() - start))
+        self.measure()
+
+    def measure(self):
+        from bench.rigs import held_errors
+        for error in held_errors(self.obj, self.rest, self.made):
+            key = ("worst_off" if error["kind"] == "HANDLE" else "worst_anchor")
+            self.worst[key] = max(self.worst.get(key, 0.0), error["off"])
+            self.worst.setdefault("per_handle", {})
+            self.worst["per_handle"][error["name"]] = max(self.worst["per_handle"].get(error["name"], 0.0), error["off"])
+
+    def row(self, **extra):
+        handles = sum(held.kind == "HANDLE" for held in self.made)
+        out = dict(vertices=int(self.rest.shape[0]), proxy_faces=self.proxy_faces, handles=handles,
+                   anchors=len(self.made) - handles, worst_off=self.worst.get("worst_off", 0.0),
+                   worst_anchor=self.worst.get("worst_anchor", 0.0), per_handle=self.worst.get("per_handle", {}))
+        if self.moves:
+            out.update(move_ms_median=float(np.median(self.moves)), move_ms_p95=float(np.percentile(self.moves, 95)),
+                       confirm_ms_median=float(np.median(self.confirms)), confirm_ms_max=float(np.max(self.confirms)))
+        return dict(out, **extra)
+
+
+TURN_30 = ("R", "THREE", "ZERO")
+
+
+def limb_rig(name, points, triangles, faces, moves):
+    """The limb: shoulder anchor, upper arm, forearm, hand; each handle dragged in turn (G, then R 30)."""
+    from bench.rigs import limb
+    parts = limb(points, triangles)
+    run = RigRun(name, points, triangles, faces)
+    run.add("ANCHOR", parts["shoulder"])
+    arm = [run.add("HANDLE", parts[part]) for part in ("upper arm", "forearm", "hand")]
+    for held in arm:
+        run.drag(held, (70, 70), moves)
+        run.drag(held, (0, 0), 0, TURN_30)
+    return run.row(rig="limb: 3 adjacent handles + shoulder anchor")
+
+
+def parented_rig(name, points, triangles, faces, moves):
+    """The limb with the hand's empty parented to the forearm's (Ctrl+P, Keep Transform); the forearm dragged."""
+    import bpy
+
+    from bench.rigs import limb
+    parts = limb(points, triangles)
+    run = RigRun(name, points, triangles, faces)
+    run.add("ANCHOR", parts["shoulder"])
+    _, forearm, hand = [run.add("HANDLE", parts[part]) for part in ("upper arm", "forearm", "hand")]
+    for other in bpy.context.view_layer.objects:
+        other.select_set(False)
+    hand.empty.select_set(True)
+    forearm.empty.select_set(True)
+    bpy.context.view_layer.objects.active = forearm.empty
+    bpy.ops.object.parent_set(type='OBJECT', keep_transform=True)
+    run.drag(forearm, (70, 70), moves)
+    run.drag(forearm, (0, 0), 0, TURN_30)
+    return run.row(rig="hand parented to the forearm's empty")
+
+
+def weighted_rig(name, points, triangles, faces, moves):
+    """Two painted groups sharing the forearm (weights 1 to 0.2), a handle from each; each dragged."""
+    from bench.rigs import falloff, limb, weighted_group
+    parts = limb(points, triangles)
+    run = RigRun(name, points, triangles, faces)
+    upper = np.union1d(parts["upper arm"], parts["forearm"])
+    lower = np.union1d(parts["forearm"], parts["hand"])
+    weighted_group(run.obj, "upper", upper, falloff(points, upper, 0.2))
+    weighted_group(run.obj, "lower", lower, falloff(points, lower, 0.2))
+    run.add("ANCHOR", parts["shoulder"])
+    for held in (run.add("HANDLE", group="upper"), run.add("HANDLE", group="lower")):
+        run.drag(held, (70, 70), moves)
+        run.drag(held, (0, 0), 0, TURN_30)
+    return run.row(rig="weighted vertex groups (overlapping)")
+
+
+def face_rig(name, points, triangles, faces, moves, count, drags):
+    """The feet anchored, ``count`` small handles over the head, each Add Handle timed; ``drags`` of them dragged."""
+    from bench.rigs import base, head, spots
+    run = RigRun(name, points, triangles, faces)
+    run.add("ANCHOR", base(points))
+    added, grips = [], []
+    for selection in spots(points, head(points), count):
+        start = time.perf_counter()
+        grips.append(run.add("HANDLE", selection))
+        added.append(time.perf_counter() - start)
+    for held in grips[::max(1, count // max(drags, 1))][:drags]:
+        run.drag(held, (21, 21), moves)
+    return run.row(rig=f"face rig: {count} small handles", add_handle_s_max=float(np.max(added)),
+                   add_handle_s_median=float(np.median(added)),
+                   selection_vertices_median=float(np.median([held.ids.size for held in grips])))
+
+
+def rig_rows(name, faces, moves, face_handles, face_drags):
+    """Every rig on mesh ``name`` bound to a proxy of about ``faces`` faces: a list of rows (dict,
+    see :meth:`RigRun.row`), a rig refused by the add-on with its message under "refused"."""
+    from skin_detach_addon.core.errors import SkinDetachError
+    points, triangles = rig_mesh(name)
+    rows = []
+    for rig in (limb_rig, parented_rig, weighted_rig, face_rig):
+        extra = (face_handles, face_drags) if rig is face_rig else ()
+        try:
+            row = rig(name, points, triangles, faces, moves, *extra)
+        except SkinDetachError as error:
+            row = dict(rig=rig.__name__, vertices=int(points.shape[0]), refused=str(error))
+        rows.append(dict(mesh=name, target_faces=faces, **row))
+    return rows
+
+
+def rig_fails(row):
+    """The goals (RIG_GOALS) ``row`` fails."""
+    if "refused" in row:
+        return ["refused"]
+    return [goal for goal, (key, limit) in RIG_GOALS.items() if key in row and not row[key] <= limit]
+
+
+def rig_line(row):
+    """A table row of a rigs row."""
+    if "refused" in row:
+        return (f"| {row['mesh']} | {row['vertices']:,} | {row['target_faces']} | {row['rig']} | refused: "
+                f"{row['refused'][:120]} |" + " - |" * 6)
+    moving = (f"{row['move_ms_median']:.1f} / {row['move_ms_p95']:.1f} | {row['confirm_ms_median']:.0f} / "
+              f"{row['confirm_ms_max']:.0f}") if "move_ms_median" in row else "- | -"
+    added = (f"{row['add_handle_s_max']:.2f} / {row['add_handle_s_median']:.2f}" if "add_handle_s_max" in row
+             else "-")
+    return (f"| {row['mesh']} | {row['vertices']:,} | {row['proxy_faces']} | {row['rig']} | "
+            f"{row['handles']} + {row['anchors']} | "
+            f"{row['worst_off']:.1e} | {row['worst_anchor']:.1e} | {moving} | {added} | "
+            f"{', '.join(rig_fails(row)) or 'none'} |")
+
+
+def run_rigs(args):
+    import bpy
+
+    import skin_detach_addon
+    if not hasattr(bpy.types.Scene, "skin_detach"):
+        skin_detach_addon.register()
+    print("## Rigs artists build (off and anchor motion over the diagonal)\n")
+    print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) | worst anchor motion (<= 1e-5) "
+          "| move ms median (<= 16) / p95 | confirm ms median / max (<= 150) | Add Handle s max (<= 0.5) / median "
+          "| fails |")
+    print("|---" * 11 + "|")
+    rows = []
+    for name in [n for n in args.rigs.split(",") if n]:
+        for faces in [int(f) for f in args.rig_faces.split(",") if f]:
+            for row in rig_rows(name, faces, args.moves, args.face_handles, args.face_drags):
+                rows.append(row)
+                print(rig_line(row), flush=True)
+    return rows
+
+
 def totals(rows):
     """Per method: meshes, total creases and mean dihedral change over the meshes every method has."""
     meshes = set.intersection(*[{r["mesh"] for r in rows if r["method"] == m} for m in {r["method"] for r in rows}])
@@ -191,8 +419,19 @@ def main():
     parser.add_argument("--poses", type=int, default=300)
     parser.add_argument("--faces", type=int, default=1000)
     parser.add_argument("--at-least", type=int, default=25_000, help="flat-subdivide smaller meshes to this many vertices")
+    parser.add_argument("--rigs", nargs="?", const=RIG_MESHES, help="run the rigs scenario on these meshes "
+                        f"(default {RIG_MESHES}) instead of the pose suite and the bend")
+    parser.add_argument("--rig-faces", default="300,1000", help="rigs: proxy target faces, each size in turn")
+    parser.add_argument("--face-handles", type=int, default=48, help="rigs: handles of the face rig")
+    parser.add_argument("--face-drags", type=int, default=4, help="rigs: face handles dragged")
+    parser.add_argument("--moves", type=int, default=30, help="rigs: mouse moves of a drag")
     parser.add_argument("--json")
     args = parser.parse_args()
+    if args.rigs:
+        figures = {"rigs": run_rigs(args)}
+        if args.json:
+            report.save(args.json, figures)
+        return
     figures = {"poses": [], "bend": []}
     print(f"## Pose suite ({args.poses} random poses, tol 1e-12, proxy target {args.faces} faces)\n")
     print("| mesh | method | proxy faces | factor ms | warm / cold converged | warm-cold within 1e-5 diag "

@@ -84,3 +84,29 @@ def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_
         assert row["stretch_max"] > row["stretch_mean"] > 0
     assert "pivot offset (diag)" in run.stdout
     assert "## Pose suite" in run.stdout and "creases (> 30 deg)" in run.stdout and "## Bend scenario" in run.stdout
+
+
+def test_quality_benchmark_rigs_option_measures_every_rig_on_a_small_mesh(tmp_path):
+    script = BENCHMARK.parent / "benchmark_quality.py"
+    run = subprocess.run([sys.executable, str(script), "--rigs", "spot", "--rig-faces", "300", "--face-handles", "6",
+                          "--face-drags", "2", "--moves", "3", "--json", str(tmp_path / "r.json")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "## Rigs artists build" in run.stdout and "## Pose suite" not in run.stdout
+    for goal in ("worst off (goal <= 1e-5)", "(<= 1e-5)", "move ms median (<= 16)", "(<= 150)", "(<= 0.5)"):
+        assert goal in run.stdout, goal
+    saved = json.loads((tmp_path / "r.json").read_text())
+    assert saved["meta"]["command"].startswith("python ") and "bpy" in saved["meta"]["versions"]
+    rows = saved["rows"]["rigs"]
+    assert [r["rig"] for r in rows] == ["limb: 3 adjacent handles + shoulder anchor", "hand parented to the forearm's empty",
+                                        "weighted vertex groups (overlapping)", "face rig: 6 small handles"]
+    for row in rows:
+        assert row["mesh"] == "spot" and row["target_faces"] == 300 and "refused" not in row
+        assert row["worst_off"] >= 0 and row["worst_anchor"] >= 0 and row["move_ms_median"] > 0
+        assert row["confirm_ms_max"] >= row["confirm_ms_median"] > 0
+        assert len(row["per_handle"]) == row["handles"] + row["anchors"]
+    assert [(r["handles"], r["anchors"]) for r in rows] == [(3, 1), (3, 1), (2, 1), (6, 1)]
+    face = rows[-1]
+    assert face["add_handle_s_max"] >= face["add_handle_s_median"] > 0
+    bad = {path: value for path, value in numbers(rows) if not math.isfinite(value)}
+    assert not bad
