@@ -597,12 +597,14 @@ def test_a_prepared_layout_has_its_float32_rebuild_made_and_rebuilds_the_same(bu
     points, tris = bundled("spot")
     sds, _, bent, groups = bent_surface(points, tris, 300)
     sds.prepare_layout(groups)
-    assert sds._rebuild_for(groups)._blocks32 is None
+    assert not sds._rebuild_for(groups).float32_ready
     sds.prepare_layout(groups, float32=True)
-    blocks = sds._rebuild_for(groups)._blocks32
-    assert blocks is not None and all(rows.dtype == np.float32 for _, rows in blocks)
+    layout = sds._rebuild_for(groups)
+    assert layout.float32_ready
+    blocks = layout.own.float32_blocks()
+    assert all(rows.dtype == np.float32 for _, rows in blocks)
     prepared = sds.reconstruct(bent, out=np.empty((sds.n_detail, 3), dtype=np.float32), groups=groups)
-    assert sds._rebuild_for(groups)._blocks32 is blocks
+    assert sds._rebuild_for(groups).own.float32_blocks() is blocks
     sds._rebuilds.clear()
     unprepared = sds.reconstruct(bent, out=np.empty((sds.n_detail, 3), dtype=np.float32), groups=groups)
     assert np.array_equal(prepared, unprepared)

@@ -20,7 +20,7 @@ from ..core.geometry import bbox_diagonal
 from ..core.held_detail import layout_of, place_held
 from ..core.proxy_solves import ProxySolves
 from ..core.stretch import SkinStretch
-from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map
+from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
 from . import mesh_io
 from .mesh_guard import MeshGuard
 
@@ -103,17 +103,22 @@ class Binding:
         self._layout = layout_of(self._layout, groups, held)
         return self._layout
 
-    def rebuild(self, proxy_vertices, layout=None, motions=()):
+    def rebuild(self, proxy_vertices, layout=None, motions=(), mirror=None):
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``layout``: their
-        rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), every held
-        vertex then placed exactly by its group's (4, 4) motion in ``motions`` (one per pair of
-        ``layout.held``; :func:`.core.held_detail.place_held`), in a reused buffer (copy it to
-        keep it past the next call)."""
+        rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), made exactly
+        symmetric with ``mirror`` (the (n,) mirror map and the axis index, see
+        :func:`.core.symmetry.symmetrize`), then every held vertex placed exactly by its group's
+        (4, 4) motion in ``motions`` (one per pair of ``layout.held``;
+        :func:`.core.held_detail.place_held`), in a reused buffer (copy it to keep it past the
+        next call)."""
         if layout is None:
-            return self.surface.reconstruct(proxy_vertices, out=self._buffer)
-        out = self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
-                                       held=layout.held or None)
-        return place_held(out, self.rest, layout.owned, motions)
+            out = self.surface.reconstruct(proxy_vertices, out=self._buffer)
+        else:
+            out = self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
+                                           held=layout.held or None)
+        if mirror is not None:
+            out[...] = symmetrize(out, *mirror)
+        return out if layout is None else place_held(out, self.rest, layout.owned, motions)
 
     def prepare(self, layout):
         """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and

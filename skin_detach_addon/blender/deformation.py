@@ -13,7 +13,6 @@ import numpy as np
 
 from ..core.errors import SkinDetachError
 from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
-from ..core.symmetry import symmetrize
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io
 from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
@@ -130,10 +129,11 @@ class Deformation:
         self.binding.prepare(layout)
 
     def _rebuild(self, axis, result, layout, motions):
-        """The detail of a solve: every held vertex where its handle's motion puts it."""
-        detail = self.binding.rebuild(result.vertices, layout, motions)
-        if axis:  # a symmetric rig on a symmetric mesh: the result is symmetric, not just nearly
-            detail[...] = symmetrize(detail, self.binding.mirror_map(axis), "XYZ".index(axis))
+        """The detail of a solve: on a symmetric rig of a symmetric mesh made exactly symmetric
+        (not just nearly), then every held vertex where its handle's motion puts it (a mesh
+        symmetric only within the mirror tolerance keeps its selection exact)."""
+        detail = self.binding.rebuild(result.vertices, layout, motions,
+                                      mirror=(self.binding.mirror_map(axis), "XYZ".index(axis)) if axis else None)
         return detail
 
     def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, idle=False):

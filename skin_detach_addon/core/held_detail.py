@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .geometry import flat_ranges
 from .validation import as_vertex_ids
 
 #: A proxy vertex is held by a selection that brings at least this share of the skin's weight on it.
@@ -125,16 +126,16 @@ def layout_of(last, groups, held):
 def proxy_ownership(surface, ids):
     """(m,) float: the share of the skin's weight on each proxy vertex that comes from the detail
     vertices ``ids`` (k,) (0 where no detail binds). The skin's weight of an association on a
-    corner is its rest-area weight times the corner's barycentric (negatives count as 0)."""
+    corner is its rest-area weight times the corner's barycentric (negatives count as 0). The
+    whole skin's weight per proxy vertex is summed once per surface; a selection's own from its
+    associations only."""
     skin = surface.skin
-    u = skin.case.shape[0]
-    selected = np.zeros(u, dtype=bool)
-    selected[surface.weld[as_vertex_ids("ids", ids, surface.n_detail)]] = True
-    share = skin.weight[:, None] * np.clip(skin.bary, 0.0, None)
-    corners = surface.proxy_faces[skin.face].ravel()
     m = surface.proxy_vertices.shape[0]
-    total = np.bincount(corners, weights=share.ravel(), minlength=m)
-    mine = np.bincount(corners, weights=(share * selected[skin.vertex][:, None]).ravel(), minlength=m)
+    total = surface.corner_weights()
+    welded = np.unique(surface.weld[as_vertex_ids("ids", ids, surface.n_detail)])
+    rows = flat_ranges(np.searchsorted(skin.vertex, welded), np.searchsorted(skin.vertex, welded, side="right"))[0]
+    share = skin.weight[rows, None] * np.clip(skin.bary[rows], 0.0, None)
+    mine = np.bincount(surface.proxy_faces[skin.face[rows]].ravel(), weights=share.ravel(), minlength=m)
     return np.divide(mine, total, out=np.zeros(m), where=total > 0)
 
 

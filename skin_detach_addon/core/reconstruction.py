@@ -103,6 +103,11 @@ class Rebuild:
                                                     shape=rows.shape, copy=False)) for order, rows in self._blocks]
         return self._blocks32
 
+    @property
+    def float32_ready(self):
+        """Whether the float32 copy is made (:meth:`float32_blocks`)."""
+        return self._blocks32 is not None
+
     def _rebuild_rows(self, block, stacked, out):
         order, rows = block
         part = np.empty((order.size, 3), dtype=out.dtype)
@@ -125,4 +130,41 @@ class Rebuild:
         if out.dtype == np.float32:
             blocks, stacked = self.float32_blocks(), stacked.astype(np.float32)
         map_blocks(lambda block: self._rebuild_rows(block, stacked, out), blocks)
+        return out
+
+
+class LayoutRebuild:
+    """The rebuild of one layout of held vertices: the free rebuild (every detail row, the free
+    diffusion's; one for all layouts) with the rows the layout changes rebuilt by its own matrix.
+
+    free   :class:`Rebuild` of the n detail rows
+    rows   (r,) int64 sorted detail rows the layout changes (within the diffusion's reach of a
+           held vertex)
+    own    :class:`Rebuild` of those r rows
+
+    ``__call__(points (m, 3), out=None)`` returns (n, 3) as :class:`Rebuild` does; the rows the
+    layout changes are those its own matrix gives, the others the free rebuild's, bit for bit.
+    Preparing a layout makes only ``own``: its cost follows the held vertices, not the mesh.
+    """
+
+    def __init__(self, free, rows, own):
+        self.free = free
+        self.rows = rows
+        self.own = own
+        self.n_detail = free.n_detail
+        self.nnz = free.nnz + own.nnz
+
+    def float32_blocks(self):
+        """Both rebuilds' float32 copies (see :meth:`Rebuild.float32_blocks`)."""
+        return self.free.float32_blocks(), self.own.float32_blocks()
+
+    @property
+    def float32_ready(self):
+        """Whether both float32 copies are made."""
+        return self.free.float32_ready and self.own.float32_ready
+
+    def __call__(self, points, out=None):
+        out = self.free(points, out=out)
+        if self.rows.size:
+            out[self.rows] = self.own(points, out=np.empty((self.rows.size, 3), dtype=out.dtype))
         return out

@@ -29,8 +29,12 @@ with deformed face normals): creases 5,867 with the plain skin, 1,273 diffused (
 resolution: 1,529); 6.8 entries per row at 300K against 7.0 for the plain skin.
 """
 
+import hashlib
+from collections import OrderedDict
+
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from . import threads
 from .geometry import flat_ranges, segment_ranges
@@ -45,6 +49,10 @@ SEAM_STEPS = 8
 #: renormalised): the rebuild reads about as many entries per row as the plain skin's.
 THRESHOLD = 0.05
 
+
+#: Islands of held rows kept diffused (:meth:`SeamWeights.layout_associations`): a rig of a few
+#: dozen handles and anchors, its last layouts' islands shared.
+KEPT_ISLANDS = 256
 
 #: Rows per slice when the rows' entries are turned around (bounds the scratch memory).
 REVERSE_ROWS = 1 << 19
@@ -115,6 +123,9 @@ class SeamWeights:
         self._frames = frames
         self._ring = one_ring(graph)
         self._free = None
+        #: The associations of the islands of recent layouts (:meth:`layout_associations`).
+        self._islands = OrderedDict()
+        self._by_face = None
 
     def _rest_of(self, rows):
         """(r, 3) where the skin as bound rebuilds the welded ``rows`` (r,) at rest: their own
@@ -163,7 +174,12 @@ class SeamWeights:
             blocks = [one_ring_rows(self._ring, a, b) for a, b in zip(bounds[:-1], bounds[1:])]
         if keep.any():
             free = sp.diags((~keep).astype(np.float64))
-            held = sp.csr_matrix(sp.diags(keep.astype(np.float64)) @ (base if held_rows is None else held_rows[rows]))
+            source = base
+            if held_rows is not None:  # its non-empty rows replace the skin's own
+                replacement = sp.csr_matrix(held_rows[rows])
+                replaced = np.diff(replacement.indptr) > 0
+                source = sp.diags((~replaced).astype(np.float64)) @ base + replacement
+            held = sp.csr_matrix(sp.diags(keep.astype(np.float64)) @ source)
 
             def hold(product):
                 return free @ product + held
@@ -239,23 +255,43 @@ class SeamWeights:
 
     def carrier_group(self, groups):
         """(u,) int64: the rigid group (``groups`` (m,) labels) holding every proxy corner the vertex
-        is bound to, -1 where its corners lie in no group or in several (or ``groups`` is None)."""
+        is bound to, -1 where its corners lie in no group or in several (or ``groups`` is None).
+        Only the vertices with an association on a face whose corners one group holds are looked
+        at (:meth:`_face_rows`): work in proportion to the groups' reach, not the mesh."""
         u = self._u
         carried = np.full(u, -1, dtype=np.int64)
         if groups is None:
             return carried
-        labels = np.asarray(groups)[self._frames.triangles[self._skin.face]]
-        counts = np.bincount(self._skin.vertex, minlength=u)
-        present = counts > 0
-        if not present.any():
+        groups = np.asarray(groups)
+        corner_groups = groups[self._frames.triangles]
+        whole = np.flatnonzero((corner_groups[:, 0] >= 0) & (corner_groups == corner_groups[:, :1]).all(axis=1))
+        if not whole.size:
             return carried
-        starts = (np.cumsum(counts) - counts)[present]  # the skin's rows are grouped by vertex
-        low = np.minimum.reduceat(labels.min(axis=1), starts)
-        carried[present] = np.where((low == np.maximum.reduceat(labels.max(axis=1), starts)) & (low >= 0), low, -1)
+        order, starts = self._face_rows()
+        candidates = np.unique(self._skin.vertex[order[flat_ranges(starts[whole], starts[whole + 1])[0]]])
+        vertex = self._skin.vertex
+        first, last = np.searchsorted(vertex, candidates), np.searchsorted(vertex, candidates, side="right")
+        rows = flat_ranges(first, last)[0]
+        labels = groups[self._frames.triangles[self._skin.face[rows]]]
+        begins = np.cumsum(last - first) - (last - first)  # the skin's rows are grouped by vertex
+        low = np.minimum.reduceat(labels.min(axis=1), begins)
+        same = (low == np.maximum.reduceat(labels.max(axis=1), begins)) & (low >= 0)
+        carried[candidates[same]] = low[same]
         return carried
 
+    def _face_rows(self):
+        """(order (a,) int32 the skin's association rows sorted by face, starts (k + 1,) where each
+        face's rows begin in it): made once."""
+        if self._by_face is None:
+            face = self._skin.face
+            order = np.argsort(face, kind="stable").astype(np.int32 if face.size < 2**31 else np.int64)
+            starts = np.searchsorted(face[order], np.arange(self._frames.triangles.shape[0] + 1))
+            self._by_face = (order, starts)
+        return self._by_face
+
     def held_by(self, groups, labels=None):
-        """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin`: the vertices carried by one
+        """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin` (a non-empty row of ``rows``
+        replaces that vertex's own weights): the vertices carried by one
         rigid group (:meth:`carrier_group`) at their own weights, unless ``labels`` (u,) names
         another group for them (-1: none), and the vertices ``labels`` says a group holds bound to
         a face that group holds whole (:func:`.held_detail.held_rows`). A selected vertex whose
@@ -266,14 +302,61 @@ class SeamWeights:
         keep = (carried >= 0) & ((labels < 0) | (labels == carried))
         rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest_of,
                          np.asarray(groups), np.where(keep, -1, labels))
-        replaced = np.diff(rows.indptr) > 0
-        base = self._base_of(np.arange(self._u))
-        return keep | replaced, sp.csr_matrix(sp.diags((~replaced).astype(np.float64)) @ base + rows)
+        return keep | (np.diff(rows.indptr) > 0), rows
+
+    def layout_associations(self, keep, held_rows=None):
+        """(rows (a,) int64 sorted welded ids, their associations (vertex, face, weight, bary,
+        height) grouped by vertex): the rows of :meth:`skin` that differ from the free diffusion's
+        with the ``keep`` (u,) rows held (at ``held_rows`` where given, see :meth:`skin`), the
+        vertices within ``steps`` rings of a held one; every other row is the free diffusion's.
+
+        The held vertices fall into islands, the connected parts of those rows: an island's rows
+        depend on its own held vertices and their rows only (a held vertex within ``steps`` rings
+        of an island's row belongs to it), so each island is diffused on its own and kept, keyed
+        by its rows, held vertices and held rows: a layout that adds a handle diffuses the new
+        handle's island (and those its change reaches), not every other handle's again."""
+        if not keep.any():
+            return np.zeros(0, dtype=np.int64), tuple(part[:0] for part in self._free_associations())
+        ids = np.flatnonzero(self._within(keep, max(self.steps, 1)))
+        count, label = connected_components(self._ring[ids][:, ids], directed=False)
+        order = np.argsort(label, kind="stable")
+        bounds = np.concatenate([[0], np.cumsum(np.bincount(label, minlength=count))])
+        islands = [ids[order[a:b]] for a, b in zip(bounds[:-1], bounds[1:])]  # each sorted (ids are)
+        parts = [self._island(island, keep, held_rows) for island in islands]
+        vertex = np.concatenate([part[0] for part in parts])
+        sort = np.argsort(vertex, kind="stable")  # islands interleave in vertex order; each grouped already
+        return ids, tuple(np.concatenate([part[i] for part in parts])[sort] for i in range(5))
+
+    def _island(self, island, keep, held_rows):
+        """The associations of the rows ``island`` (sorted welded ids) of a layout (see
+        :meth:`layout_associations`), from the kept islands or made and kept (the last
+        :data:`KEPT_ISLANDS`)."""
+        held = island[keep[island]]
+        digest = hashlib.blake2b(island.tobytes(), digest_size=20)
+        digest.update(held.tobytes())
+        if held_rows is not None:
+            rows = sp.csr_matrix(held_rows[held])
+            for array in (np.diff(rows.indptr), rows.indices, rows.data):
+                digest.update(b"|" + np.ascontiguousarray(array).tobytes())
+        key = digest.digest()
+        if key in self._islands:
+            self._islands.move_to_end(key)
+            return self._islands[key]
+        chosen = np.zeros(self._u, dtype=bool)
+        chosen[island] = True
+        region = np.flatnonzero(self._within(chosen, self.steps))
+        local = self._associations(region, self._diffused(region, keep[region], held_rows))
+        inside = chosen[local[0]]
+        made = tuple(part[inside] for part in local)
+        self._islands[key] = made
+        while len(self._islands) > KEPT_ISLANDS:
+            self._islands.popitem(last=False)
+        return made
 
     def skin(self, keep=None, held_rows=None):
         """The diffused :class:`.skin.Skin` with the ``keep`` (u,) rows held (None: none), at their
-        own weights or, where given, at ``held_rows`` (u, k) CSR (rows of held vertices are read:
-        a vertex held by a handle whose proxy corners are not all held is bound to faces that are)."""
+        own weights or, where ``held_rows`` (u, k) CSR has a non-empty row, at that row (a vertex
+        held by a handle whose proxy corners are not all held is bound to faces that are)."""
         if self.steps <= 0 and held_rows is None:
             return self._skin
         parts = self._free_associations()
@@ -285,17 +368,22 @@ class SeamWeights:
         vertex, face, weight, bary, height = parts
         return Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=self._skin.case)
 
-    def skin_of(self, vertices, keep=None):
+    def reach(self, vertices):
+        """(u,) bool of the welded ``vertices`` (s,) and (r,) int64 sorted ids of the vertices within
+        ``steps`` rings of them: what their rows in :meth:`skin_of` read."""
+        chosen = np.zeros(self._u, dtype=bool)
+        chosen[vertices] = True
+        return chosen, np.flatnonzero(self._within(chosen, self.steps))
+
+    def skin_of(self, vertices, keep=None, reach=None):
         """The associations of :meth:`skin` (``keep`` (u,) bool, no held rows) of the welded
         ``vertices`` (s,) only, the other vertices without any: the same rows bit for bit, made
         from the sub-mesh within ``steps`` rings of them (a row after that many steps reads only
-        rows that near), so a handle's drop rows cost its neighbourhood, not the mesh."""
+        rows that near), so a handle's drop rows cost its neighbourhood, not the mesh.
+        ``reach``: :meth:`reach` of ``vertices``, if the caller has it."""
         if self.steps <= 0:
             return self._skin
-        u = self._u
-        chosen = np.zeros(u, dtype=bool)
-        chosen[vertices] = True
-        region = np.flatnonzero(self._within(chosen, self.steps))
+        chosen, region = self.reach(vertices) if reach is None else reach
         held = np.zeros(region.size, dtype=bool) if keep is None else keep[region]
         parts = self._associations(region, self._diffused(region, held))
         inside = chosen[parts[0]]

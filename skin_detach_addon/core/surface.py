@@ -7,6 +7,7 @@
 import hashlib
 import json
 import time
+from collections import OrderedDict
 
 from dataclasses import dataclass
 
@@ -20,7 +21,7 @@ from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
 from .held_detail import layout_of, owned_pairs
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
-from .reconstruction import Rebuild, rebuild_matrix
+from .reconstruction import LayoutRebuild, Rebuild, rebuild_matrix
 from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
 from .skin import (CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, ProxyFrames, Skin, bind_skin, bound_disagreement,
@@ -35,6 +36,10 @@ NORMAL_TEST_OVERSAMPLE = 1.5
 #: ... and 1.25 times when it simplifies a clustered copy: measured on the armadillo at 800K, the
 #: test then stops at 1,036 faces for 1,000 (1,204 from 1.5) with fewer disagreeing normals.
 CLUSTERED_OVERSAMPLE = 1.25
+
+#: Selections whose drop rows are kept (:meth:`SkinDetachedSurface.drop_rows`): a rig of a few
+#: dozen handles, its last layouts' selections shared.
+KEPT_DROP_ROWS = 256
 
 _SKIN_FIELDS = ("vertex", "face", "bary", "height", "weight", "case")
 
@@ -157,6 +162,9 @@ class SkinDetachedSurface:
         #: The layout of the last rebuild asked for (its key made once, not once per drag move).
         self._layout = None
         self._seam_steps = SEAM_STEPS
+        #: Drop rows of recent selections (:meth:`_drop_rows_of`).
+        self._drops = OrderedDict()
+        self._corner_weights = None
 
     @property
     def seam_steps(self):
@@ -171,6 +179,7 @@ class SkinDetachedSurface:
         self._seam_steps = int(steps)
         self._seams = None
         self._rebuilds = {}
+        self._drops.clear()
 
     def attach_topology(self, triangles, edges=None):
         """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), over
@@ -181,6 +190,7 @@ class SkinDetachedSurface:
         self._edges = edges
         self._seams = None
         self._rebuilds = {}
+        self._drops.clear()
 
     def _seam_weights(self):
         if self.triangles is None:
@@ -203,28 +213,45 @@ class SkinDetachedSurface:
                 labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
         return labels
 
-    def _layout_skin(self, groups, held):
+    def _free_rebuild(self):
+        """The :class:`.reconstruction.Rebuild` of the free diffused skin, every detail row: what
+        every layout's rebuild shares (made once; :meth:`build` makes the diffusion itself)."""
+        if None not in self._rebuilds:
+            skin = self._seam_weights().skin()
+            check_coefficients(skin, "the diffused skin")
+            self._rebuilds[None] = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
+        return self._rebuilds[None]
+
+    def _layout_rebuild(self, groups, held):
+        """The :class:`.reconstruction.LayoutRebuild` of a layout: the free rebuild with the rows
+        within the diffusion's reach of its held vertices rebuilt from their own associations."""
         seams = self._seam_weights()
         keep, rows = seams.held_by(groups, None if held is None else self._held_labels(held))
-        return seams.skin(keep, rows)
+        welded, parts = seams.layout_associations(keep, rows)
+        vertex, face, weight, bary, height = parts
+        skin = Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=self.skin.case)
+        check_coefficients(skin, "the diffused skin")
+        changed = np.zeros(self.skin.case.shape[0], dtype=bool)
+        changed[welded] = True
+        detail_rows = np.flatnonzero(changed[self.weld])
+        return LayoutRebuild(self._free_rebuild(), detail_rows,
+                             Rebuild(skin, self.weld[detail_rows], self.proxy_vertices, self.proxy_faces))
 
     def _rebuild_for(self, groups, held=None):
-        """The :class:`.reconstruction.Rebuild` of the diffused skin with the vertices carried by
-        one rigid group held (``groups`` (m,) int64 or None) and those ``held`` names (pairs
-        (group label, detail ids) or None) bound to faces their group holds; the last two layouts
-        are kept, keyed by :meth:`.held_detail.Layout.key` (a drag move looks its matrix up
-        without a pass over the detail)."""
+        """The rebuild with the vertices carried by one rigid group held (``groups`` (m,) int64 or
+        None: the free rebuild) and those ``held`` names (pairs (group label, detail ids) or None)
+        bound to faces their group holds (:meth:`_layout_rebuild`); the free rebuild and the last
+        two layouts are kept, keyed by :meth:`.held_detail.Layout.key` (a drag move looks its
+        matrix up without a pass over the detail)."""
         if groups is None:
-            key = None
-        else:
-            self._layout = layout_of(self._layout, groups, held or [])
-            key = self._layout.key()
+            return self._free_rebuild()
+        self._layout = layout_of(self._layout, groups, held or [])
+        key = self._layout.key()
         if key not in self._rebuilds:
-            if len(self._rebuilds) >= 2:
-                self._rebuilds.pop(next(iter(self._rebuilds)))
-            skin = self._layout_skin(groups, held)
-            check_coefficients(skin, "the diffused skin")
-            self._rebuilds[key] = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
+            layouts = [known for known in self._rebuilds if known is not None]
+            if len(layouts) >= 2:
+                self._rebuilds.pop(layouts[0])
+            self._rebuilds[key] = self._layout_rebuild(groups, held)
         return self._rebuilds[key]
 
     def drop_rows(self, selections, groups=None):
@@ -236,14 +263,31 @@ class SkinDetachedSurface:
         over the selections' neighbourhood only (:meth:`.seam_weights.SeamWeights.skin_of`)."""
         selections = [as_vertex_ids("selections", ids, self.n_detail) if np.size(ids) else np.zeros(0, dtype=np.int64)
                       for ids in selections]  # a selection a later group took whole pulls nothing
-        m = self.proxy_vertices.shape[0]
-        ids = np.concatenate(selections) if selections else np.zeros(0, dtype=np.int64)
         seams = self._seam_weights()
         keep, _ = seams.held_by(None if groups is None else np.asarray(groups, dtype=np.int64))
-        skin = seams.skin_of(np.unique(self.weld[ids]), keep)
-        rows = sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
-        bounds = np.cumsum([0] + [part.size for part in selections])
-        return [rows[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+        return [self._drop_rows_of(ids, keep) for ids in selections]
+
+    def _drop_rows_of(self, ids, keep):
+        """(k, m) CSR: :meth:`drop_rows` of one selection of detail ids ``ids`` (k,) with the held
+        vertices ``keep`` (u,) bool, kept per selection and the held vertices within its reach (a
+        new handle makes the drop rows of its own selection, and of those whose neighbourhood its
+        proxy vertices change)."""
+        m = self.proxy_vertices.shape[0]
+        if not ids.size:
+            return sp.csr_matrix((0, m))
+        seams = self._seam_weights()
+        welded = np.unique(self.weld[ids])
+        reach = seams.reach(welded)
+        digest = hashlib.blake2b(ids.tobytes(), digest_size=20)
+        digest.update(b"|" + reach[1][keep[reach[1]]].tobytes())
+        key = digest.digest()
+        if key not in self._drops:
+            skin = seams.skin_of(welded, keep, reach)
+            self._drops[key] = sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
+            while len(self._drops) > KEPT_DROP_ROWS:
+                self._drops.popitem(last=False)
+        self._drops.move_to_end(key)
+        return self._drops[key]
 
     @property
     def n_detail(self):
@@ -364,9 +408,9 @@ class SkinDetachedSurface:
         del mesh, clustered  # their normals, components and cluster map: not needed for the seams
         surface.attach_topology(triangles, edges)  # the caller's array (validated again, not kept twice)
         del edges  # the seams drop it once made
-        # The skin diffused over the whole detail mesh, once: every layout's rebuild starts from it.
-        # (The rebuild of no layout at all, which the add-on never asks for, is made on first use.)
-        surface._seam_weights().skin()
+        # The skin diffused over the whole detail mesh and its rebuild, once: every layout's rebuild
+        # is this one with the rows near its held vertices replaced.
+        surface._free_rebuild()
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
@@ -415,6 +459,16 @@ class SkinDetachedSurface:
         if held is not None and groups is None:
             raise SkinDetachError("held: expected groups (the rigid group of every proxy vertex) with held detail, got none")
         return groups, None if held is None else [(label, ids) for label, ids in held]
+
+    def corner_weights(self):
+        """(m,) float64: the skin's weight on each proxy vertex, summed over every association (its
+        rest-area weight times the corner's barycentric, negatives as 0; see
+        :func:`.held_detail.proxy_ownership`), made once."""
+        if self._corner_weights is None:
+            share = self.skin.weight[:, None] * np.clip(self.skin.bary, 0.0, None)
+            self._corner_weights = np.bincount(self.proxy_faces[self.skin.face].ravel(), weights=share.ravel(),
+                                               minlength=self.proxy_vertices.shape[0])
+        return self._corner_weights
 
     def proxy_vertices_for(self, ids):
         """Sorted unique proxy vertex ids that carry the detail vertices ``ids``: every corner of
