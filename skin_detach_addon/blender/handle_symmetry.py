@@ -68,7 +68,9 @@ def _moved(empty):
 
 def sync_twins(obj, empties):
     """Move every twin whose partner moved since the last sync to the mirror image of the
-    partner's motion (in ``obj``'s local space); when both moved, the older one leads."""
+    partner's motion (in ``obj``'s local space); when both moved, the older one leads. Raises,
+    moving nothing, when a transform of ``obj`` or of any of ``empties`` is not finite."""
+    handles.check_transforms(obj, empties)
     done = set()
     for empty in empties:
         twin = twin_of(empty)

@@ -207,8 +207,40 @@ def has_old_pivot(empty):
     return value_of(empty, "pivot") != PIVOT and detail_ids_of(empty).size > 0
 
 
+def check_transform(obj, what="handle"):
+    """Raise unless the world matrix of ``obj`` (a handle's empty, ``what`` names it, or the bound
+    object) is finite, naming the first of its own transform fields that is not (location,
+    rotation, scale, their deltas, the parent inverse) with its values, else its parent."""
+    if np.isfinite(np.array(obj.matrix_world, dtype=np.float64)).all():
+        return
+    quaternion = obj.rotation_mode == 'QUATERNION'
+    rotation = {'QUATERNION': "rotation_quaternion", 'AXIS_ANGLE': "rotation_axis_angle"}.get(obj.rotation_mode,
+                                                                                              "rotation_euler")
+    for field in ("location", rotation, "scale", "delta_location",
+                  "delta_rotation_quaternion" if quaternion else "delta_rotation_euler", "delta_scale",
+                  "matrix_parent_inverse"):
+        values = np.array(getattr(obj, field), dtype=np.float64)
+        if not np.isfinite(values).all():
+            raise SkinDetachError(f"{what} {obj.name!r}: expected a finite {field}, got "
+                                  f"{tuple(float(v) for v in values.ravel())} (nothing was written); fix or undo it")
+    parent = getattr(obj.parent, "name", None)
+    raise SkinDetachError(f"{what} {obj.name!r}: expected a finite transform, got a non-finite world matrix "
+                          f"{'from its parent ' + repr(parent) if parent else 'from a constraint or driver'} "
+                          f"(nothing was written); fix or undo it")
+
+
+def check_transforms(obj, empties):
+    """:func:`check_transform` of the bound object ``obj`` and each of its handle and anchor ``empties``."""
+    check_transform(obj, "object")
+    for empty in empties:
+        check_transform(empty)
+
+
 def local_motion(obj, empty):
-    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made."""
+    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made (raises
+    naming the field when a transform is not finite)."""
+    check_transform(obj, "object")
+    check_transform(empty)
     world = np.array(obj.matrix_world, dtype=np.float64)
     try:
         return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ \
