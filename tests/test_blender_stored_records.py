@@ -162,3 +162,104 @@ def test_live_update_reports_a_nan_once_and_keeps_running(scene, capsys):
     assert obj.name not in live_update.ERRORS
     rest = api.rest_positions(obj).astype(np.float64)
     assert off(obj, top, rest, float(np.linalg.norm(np.ptp(rest, axis=0)))) <= 1e-5
+
+
+# Item 10: every stored record checked where it is read.
+
+def _rigged(name):
+    obj, rest, _ = sphere(name)
+    api.add_anchor(obj, np.flatnonzero(rest[:, 2] < -0.7), mirror="")
+    top = api.add_handle(obj, np.flatnonzero(rest[:, 2] > 0.7), mirror="")
+    top.location.z += 0.1
+    bpy.context.view_layer.update()
+    return obj, top
+
+
+def _replace(record, key, value):
+    if key in record:
+        del record[key]  # an ID-property array keeps its length when assigned over
+    record[key] = value
+
+
+@pytest.mark.parametrize("step", ["deform", "prepare", "bake"])
+def test_a_detail_id_past_the_mesh_is_refused_naming_the_handle_the_field_and_the_values(scene, tmp_path, step):
+    obj, top = _rigged("sphere")
+    n = len(obj.data.vertices)
+    ids = np.array(top[handles.TAG]["detail_ids"])
+    _replace(top[handles.TAG], "detail_ids", np.r_[ids, n + 4].astype(np.int32))
+    call = {"deform": lambda: api.deform(obj), "prepare": lambda: api.prepare(obj),
+            "bake": lambda: api.bake(obj, "1-2", into=api.FILES, path=str(tmp_path / "m_####.obj"))}[step]
+    refused(call, f"handle '{top.name}'", f"expected detail_ids in [0, {n}), got values in [0, {n + 4}]")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("key, value, expected", [
+    ("detail_ids", np.array([-3, 5], dtype=np.int32), "expected detail_ids in [0, {n}), got values in [-3, 5]"),
+    ("detail_ids", "abc", "expected integer detail_ids"),
+    ("proxy_ids", np.array([0, 10**6], dtype=np.int32), "expected proxy_ids in [0, {m}), got values in [0, 1000000]"),
+    ("rest_local", np.zeros(5), "expected rest_local: 16 finite numbers of an invertible 4x4 frame, got 5 values"),
+    ("rest_local", np.zeros(16), "got a singular frame"),
+    ("mirror", "W", "expected mirror '', 'X', 'Y' or 'Z', got 'W'"),
+    ("mirror", 3, "expected mirror '', 'X', 'Y' or 'Z', got 3"),
+    ("kind", "MAGNET", "expected kind"),
+])
+def test_a_damaged_handle_record_is_refused_naming_the_field(scene, key, value, expected):
+    obj, top = _rigged("sphere")
+    n, m = len(obj.data.vertices), len(api.proxy_of(obj).data.vertices)
+    _replace(top[handles.TAG], key, value)
+    for call in (lambda: api.deform(obj), lambda: api.prepare(obj)):
+        refused(call, f"handle '{top.name}'", expected.format(n=n, m=m))
+
+
+def test_a_damaged_twin_record_and_written_matrix_are_refused_or_healed(scene, tmp_path):
+    obj, rest, _ = sphere(toggle="X")
+    grip = api.add_handle(obj, np.flatnonzero(rest[:, 0] > 0.7))
+    grip.location.z += 0.1
+    _replace(grip[handles.TAG], "synced", "abc")               # bookkeeping of the twins' sync: synced again
+    api.deform(obj)
+    assert np.array(grip[handles.TAG]["synced"]).shape == (16,)
+    obj[binding.KEY]["written_matrix"] = "abc"
+    refused(lambda: api.bake(obj, "1-2", into=api.FILES, path=str(tmp_path / "m_####.obj")),
+            f"binding of '{obj.name}'", "expected written_matrix: 16 finite numbers, got 'abc'")
+    api.deform(obj)                                            # Apply writes it anew
+    assert np.isfinite(binding.written_state(obj)[1]).all()
+
+
+def test_the_idle_preparation_skips_a_damaged_mesh_once_and_prepares_the_others(scene, tmp_path, capsys):
+    damaged, top = _rigged("a_damaged")
+    good, _ = _rigged("b_good")
+    n = len(damaged.data.vertices)
+    _replace(top[handles.TAG], "detail_ids", np.r_[np.array(top[handles.TAG]["detail_ids"]), n].astype(np.int32))
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "two.blend"))
+    binding._CACHE.clear()
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "two.blend"))
+    assert idle_preparation.queued() == ["a_damaged", "b_good"]
+    for _ in range(5):                                         # the timer's ticks, until it stops itself
+        if idle_preparation.prepare_next() is None:
+            break
+    assert not idle_preparation.queued()
+    said = capsys.readouterr().out
+    assert said.count("a_damaged not prepared") == 1, said
+    assert f"expected detail_ids in [0, {n}), got values in [0, {n}]" in idle_preparation.FAILED["a_damaged"]
+    assert "b_good" not in idle_preparation.FAILED
+    record = binding.open_binding(bpy.data.objects["b_good"])
+    assert record.solves._solvers and record.surface._rebuilds  # the mesh after the damaged one was prepared
+
+
+def test_the_idle_preparation_survives_an_internal_error(scene, monkeypatch, capsys):
+    first, _ = _rigged("a_first")
+    second, _ = _rigged("b_second")
+    prepared = []
+
+    def prepare(obj, preserve_volume=True):
+        if obj.name == "a_first":
+            raise IndexError("index 487 is out of bounds")
+        prepared.append(obj.name)
+
+    monkeypatch.setattr(api, "prepare", prepare)
+    idle_preparation._queue[:] = ["a_first", "b_second"]
+    assert idle_preparation.prepare_next() == 0.0             # the timer goes on
+    assert idle_preparation.prepare_next() is None
+    assert prepared == ["b_second"]
+    assert "internal error IndexError" in idle_preparation.FAILED["a_first"]

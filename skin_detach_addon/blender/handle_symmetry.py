@@ -10,6 +10,7 @@ under ``"synced"`` (16 float64, row-major); moving either moves the other, mirro
 import numpy as np
 from mathutils import Matrix
 
+from ..core.errors import SkinDetachError
 from . import handles
 
 AXES = ("X", "Y", "Z")
@@ -48,9 +49,12 @@ def twin_of(empty):
 
 
 def mirror_of(empty):
-    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or ""."""
+    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or "" (raises
+    naming the record's ``mirror`` when it holds anything else)."""
     axis = handles.value_of(empty, "mirror", "")
-    return axis if axis in AXES else ""
+    if not isinstance(axis, str) or axis not in ("", *AXES):
+        raise SkinDetachError(f"handle {empty.name!r}: expected mirror '', 'X', 'Y' or 'Z', got {axis!r}; remove it")
+    return axis
 
 
 def _basis(empty):
@@ -62,7 +66,12 @@ def _mark_synced(empty):
 
 
 def _moved(empty):
-    synced = np.asarray(handles.value_of(empty, "synced", []), dtype=np.float64)
+    """The empty moved since the last sync (a ``synced`` record that is not 16 numbers counts as
+    moved: the twins are synced again and it is written anew)."""
+    try:
+        synced = np.asarray(handles.value_of(empty, "synced", []), dtype=np.float64)
+    except (TypeError, ValueError):
+        return True
     return synced.shape != (16,) or not np.array_equal(synced, _basis(empty))
 
 

@@ -27,7 +27,7 @@ PIVOT = "selection median"
 def is_handle(obj):
     """``obj`` is a handle or anchor empty that is in a scene (one deleted in the viewport but kept
     alive by another object's pointer, such as its twin's, is gone)."""
-    return obj is not None and obj.type == 'EMPTY' and TAG in obj and len(obj.users_scene) > 0
+    return getattr(obj, "type", None) == 'EMPTY' and TAG in obj and len(obj.users_scene) > 0
 
 
 def owner(empty):
@@ -69,13 +69,16 @@ def detail_ids_of(empty, n=None):
 def rest_local_of(empty):
     """(4, 4) float64 rest frame of the empty in the bound object's local space (a copy: the ID
     property it is read from may be replaced, by a Rebuild, while the array is still held)."""
+    stored = value_of(empty, "rest_local")
     try:
-        frame = np.array(value_of(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
+        frame = np.array(stored, dtype=np.float64).reshape(4, 4)
     except (TypeError, ValueError):
-        frame = np.full((4, 4), np.nan)
-    if not np.isfinite(frame).all():
-        raise SkinDetachError(f"handle {empty.name!r}: expected a finite 4x4 rest frame, got unreadable or "
-                              f"non-finite values; remove it")
+        frame = None
+    if frame is None or not np.isfinite(frame).all() or abs(np.linalg.det(frame)) < 1e-300:
+        got = f"{np.size(stored)} values" if frame is None else \
+            "non-finite values" if not np.isfinite(frame).all() else "a singular frame"
+        raise SkinDetachError(f"handle {empty.name!r}: expected rest_local: 16 finite numbers of an invertible "
+                              f"4x4 frame, got {got if stored is not None else 'none'}; remove it or Rebuild")
     return frame
 
 
@@ -257,7 +260,7 @@ def constraints(obj, empties, rest_proxy):
     vertices (the anchors' together, motion the identity), from the handle and anchor
     ``empties`` of ``obj`` (:func:`handles_of`). Handles override anchors; a later handle
     overrides an older one."""
-    m = rest_proxy.shape[0]
+    m, n = rest_proxy.shape[0], len(obj.data.vertices)
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
@@ -276,13 +279,13 @@ def constraints(obj, empties, rest_proxy):
                                       f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
             targets[ids] = moved
             groups[ids] = label
-            selected = detail_ids_of(empty)
+            selected = detail_ids_of(empty, n)
             if selected.size:
                 detail.append((label, selected, motion))
         else:
             targets[ids] = rest_proxy[ids]
             groups[ids] = 0
-            anchored.append(detail_ids_of(empty))
+            anchored.append(detail_ids_of(empty, n))
         held[ids] = True
     # One anchor's ids are stored sorted and unique already (a union costs a sort of them per move).
     if len(anchored) > 1:
