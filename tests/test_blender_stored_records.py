@@ -263,3 +263,25 @@ def test_the_idle_preparation_survives_an_internal_error(scene, monkeypatch, cap
     assert idle_preparation.prepare_next() is None
     assert prepared == ["b_second"]
     assert "internal error IndexError" in idle_preparation.FAILED["a_first"]
+
+
+# Item 11: messages give the values as they are.
+
+def test_a_stored_negative_id_says_non_negative_or_the_real_bound(scene):
+    obj, top = _rigged("sphere")
+    n = len(obj.data.vertices)
+    _replace(top[handles.TAG], "detail_ids", np.array([-3, 5], dtype=np.int32))
+    with pytest.raises(SkinDetachError, match=r"expected non-negative detail_ids below 2\*\*63, got values in \[-3, 5\]"):
+        handles.detail_ids_of(top)
+    with pytest.raises(SkinDetachError, match=rf"expected detail_ids in \[0, {n}\), got values in \[-3, 5\]"):
+        handles.detail_ids_of(top, n)
+
+
+def test_a_uint64_id_of_2_63_is_reported_as_it_is(scene):
+    obj, top = _rigged("sphere")
+    n = len(obj.data.vertices)
+    with pytest.raises(SkinDetachError) as caught:
+        api.add_handle(obj, np.array([2**63], dtype=np.uint64))
+    assert f"expected vertex ids in [0, {n}), got values in [9223372036854775808, 9223372036854775808]" \
+        in str(caught.value)
+    assert "-9223372036854775808" not in str(caught.value)

@@ -13,6 +13,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
+from ..core.validation import as_ids
 
 TAG = "_skin_detach_handle"
 #: Handle targets farther than this from the object's origin are refused (float32 stores the mesh).
@@ -46,14 +47,12 @@ def kind_of(empty):
 
 
 def _ids(empty, key, limit=None):
-    raw = np.asarray(value_of(empty, key, []))
-    if raw.size and raw.dtype.kind not in "iu":
-        raise SkinDetachError(f"handle {empty.name!r}: expected integer {key}, got {raw.dtype}; remove it")
-    ids = raw.astype(np.int64).ravel()
-    if ids.size and (ids.min() < 0 or (limit is not None and ids.max() >= limit)):
-        raise SkinDetachError(f"handle {empty.name!r}: expected {key} in [0, {limit}), got values in "
-                              f"[{ids.min()}, {ids.max()}]; remove it or Rebuild")
-    return ids
+    """(k,) int64 the ids stored under ``key``, checked: integers in [0, ``limit``) (non-negative
+    when no bound is known)."""
+    try:
+        return as_ids(f"handle {empty.name!r}", value_of(empty, key, []), limit, key)
+    except SkinDetachError as exc:
+        raise SkinDetachError(f"{exc}; remove it or Rebuild") from None
 
 
 def proxy_ids_of(empty, m=None):
