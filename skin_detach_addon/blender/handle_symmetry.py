@@ -77,9 +77,8 @@ def _moved(empty):
 
 def sync_twins(obj, empties):
     """Move every twin whose partner moved since the last sync to the mirror image of the
-    partner's motion (in ``obj``'s local space); when both moved, the older one leads. Raises,
-    moving nothing, when a transform of ``obj`` or of any of ``empties`` is not finite."""
-    handles.check_transforms(obj, empties)
+    partner's motion (in ``obj``'s local space); when both moved, the older one leads. Raises
+    (:func:`.handles.local_motion`) before a twin is moved to a non-finite motion."""
     done = set()
     for empty in empties:
         twin = twin_of(empty)
