@@ -112,8 +112,9 @@ def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
     naming how many have none, when the mesh is not symmetric enough); moving either one moves
     both, mirrored. A selection that is its own mirror image makes one handle that keeps the rig
     symmetric. When every handle and anchor of a rig has a twin across one axis or is its own
-    mirror image across it (toggles and flags aside), the result is made exactly symmetric, and
-    self-symmetric handles move only symmetrically. Returns the handle made from
+    mirror image across it, the result is made exactly symmetric: across an axis asked for (its
+    mesh toggle or a mirror flag) always, self-symmetric handles moving only symmetrically;
+    across any other only while every handle moves symmetrically. Returns the handle made from
     ``vertex_ids``; its twin is in :func:`handles_of`."""
     return _add(obj, vertex_ids, handles.HANDLE, on_proxy, group, mirror)
 

@@ -336,8 +336,15 @@ def mark_written(obj, positions):
 def written_state(obj):
     """(digest of the positions Skin Detach last wrote into ``obj``'s mesh, the object's world
     matrix then (16,) or None in files of earlier versions)."""
-    matrix = obj[KEY].get("written_matrix")
-    return obj[KEY].get("written_digest"), None if matrix is None else np.asarray(matrix, dtype=np.float64)
+    stored = obj[KEY].get("written_matrix")
+    try:
+        matrix = None if stored is None else np.asarray(stored, dtype=np.float64).reshape(16)
+    except (TypeError, ValueError):
+        matrix = np.full(16, np.nan)
+    if matrix is not None and not np.isfinite(matrix).all():
+        raise SkinDetachError(f"binding of {obj.name!r}: expected written_matrix: 16 finite numbers, got "
+                              f"{stored!r:.60}; press Apply or Rebuild")
+    return obj[KEY].get("written_digest"), matrix
 
 
 def set_written_state(obj, state):

@@ -10,6 +10,7 @@ under ``"synced"`` (16 float64, row-major); moving either moves the other, mirro
 import numpy as np
 from mathutils import Matrix
 
+from ..core.errors import SkinDetachError
 from . import handles
 
 AXES = ("X", "Y", "Z")
@@ -48,9 +49,12 @@ def twin_of(empty):
 
 
 def mirror_of(empty):
-    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or ""."""
+    """The local axis a handle is mirrored across or symmetric about ("X", "Y", "Z"), or "" (raises
+    naming the record's ``mirror`` when it holds anything else)."""
     axis = handles.value_of(empty, "mirror", "")
-    return axis if axis in AXES else ""
+    if not isinstance(axis, str) or axis not in ("", *AXES):
+        raise SkinDetachError(f"handle {empty.name!r}: expected mirror '', 'X', 'Y' or 'Z', got {axis!r}; remove it")
+    return axis
 
 
 def _basis(empty):
@@ -62,13 +66,19 @@ def _mark_synced(empty):
 
 
 def _moved(empty):
-    synced = np.asarray(handles.value_of(empty, "synced", []), dtype=np.float64)
+    """The empty moved since the last sync (a ``synced`` record that is not 16 numbers counts as
+    moved: the twins are synced again and it is written anew)."""
+    try:
+        synced = np.asarray(handles.value_of(empty, "synced", []), dtype=np.float64)
+    except (TypeError, ValueError):
+        return True
     return synced.shape != (16,) or not np.array_equal(synced, _basis(empty))
 
 
 def sync_twins(obj, empties):
     """Move every twin whose partner moved since the last sync to the mirror image of the
-    partner's motion (in ``obj``'s local space); when both moved, the older one leads."""
+    partner's motion (in ``obj``'s local space); when both moved, the older one leads. Raises
+    (:func:`.handles.local_motion`) before a twin is moved to a non-finite motion."""
     done = set()
     for empty in empties:
         twin = twin_of(empty)
@@ -88,30 +98,39 @@ def sync_twins(obj, empties):
 
 def symmetry_axis(obj, empties, own_mirror_image):
     """(axis, asked): the local axis ("X", "Y", "Z") a rig of ``obj`` is symmetric about, or "",
-    and whether symmetry was asked for across it. Symmetric: each handle and anchor of
-    ``empties`` has a mirror twin across the axis or holds mesh vertices that are their own
-    mirror image (``own_mirror_image(detail_ids (k,), axis) -> bool``), whatever the mesh's
-    toggles and the handles' mirror flags say; asked: the mesh's mirror toggle for the axis is
-    on or a handle carries its mirror flag. A lone flagged handle (its twin deleted) or a Shift+D
-    copy of a twin (nobody's twin) makes the rig asymmetric, so the detail is never averaged with
-    a side the proxy does not mirror."""
+    and whether symmetry was asked for across it (the mesh's mirror toggle for the axis is on or
+    a handle carries its mirror flag); an axis asked for comes first. Symmetric: each handle and
+    anchor of ``empties`` has a mirror twin across the axis or holds mesh vertices that are their
+    own mirror image (``own_mirror_image(detail_ids (k,), axis) -> bool``). A lone flagged handle
+    (its twin deleted) or a Shift+D copy of a twin (nobody's twin) makes the rig asymmetric, so
+    the detail is never averaged with a side the proxy does not mirror; a rig symmetric across
+    an axis nobody asked for counts as symmetric only while it moves symmetrically (see
+    :func:`moves_symmetrically`)."""
+    n = len(obj.data.vertices)
+    found = []
     for axis in AXES if empties else ():
-        if all(mirror_of(e) == axis and twin_of(e) is not None or self_symmetric(e, axis, own_mirror_image)
-               for e in empties):
+        if all(_twinned(e, axis) or self_symmetric(e, axis, own_mirror_image, n) for e in empties):
             asked = getattr(obj.data, f"use_mirror_{axis.lower()}", False) or any(mirror_of(e) == axis for e in empties)
-            return axis, bool(asked)
-    return "", False
+            found.append((not asked, axis))
+    return (min(found)[1], not min(found)[0]) if found else ("", False)
 
 
 def moves_symmetrically(obj, empties, axis):
-    """Every handle of ``empties`` without a twin moves by a motion that commutes with the mirror
-    across ``axis`` (twins are mirrored by :func:`sync_twins`)."""
-    return not any(_made_symmetric(obj, empty, axis) is not None for empty in _lone_handles(empties))
+    """Every handle of ``empties`` without a twin across ``axis`` (its own mirror image there, a
+    twin across another axis included) moves by a motion that commutes with the mirror across
+    ``axis`` (twins across it are mirrored by :func:`sync_twins`)."""
+    return not any(_made_symmetric(obj, empty, axis) is not None for empty in _untwinned_handles(empties, axis))
 
 
-def _lone_handles(empties):
-    """The handles of ``empties`` without a mirror twin (anchors and twins move symmetrically)."""
-    return [e for e in empties if handles.kind_of(e) == handles.HANDLE and twin_of(e) is None]
+def _twinned(empty, axis):
+    """The handle or anchor has its mirror twin across ``axis``."""
+    return mirror_of(empty) == axis and twin_of(empty) is not None
+
+
+def _untwinned_handles(empties, axis):
+    """The handles of ``empties`` without a mirror twin across ``axis`` (anchors hold their rest,
+    twins across it are mirrored by :func:`sync_twins`)."""
+    return [e for e in empties if handles.kind_of(e) == handles.HANDLE and not _twinned(e, axis)]
 
 
 def _made_symmetric(obj, empty, axis):
@@ -122,9 +141,10 @@ def _made_symmetric(obj, empty, axis):
     return symmetric if np.abs(symmetric - motion).max() > 1e-9 * max(1.0, np.abs(motion[:3, 3]).max()) else None
 
 
-def self_symmetric(empty, axis, own_mirror_image):
-    """The handle was made from mesh vertices that are their own mirror image across ``axis``."""
-    ids = handles.detail_ids_of(empty)
+def self_symmetric(empty, axis, own_mirror_image, n=None):
+    """The handle was made from mesh vertices (ids checked against ``n``) that are their own mirror
+    image across ``axis``."""
+    ids = handles.detail_ids_of(empty, n)
     return ids.size > 0 and own_mirror_image(ids, axis)
 
 
@@ -148,15 +168,15 @@ def symmetric_motion(motion, axis):
 
 
 def keep_symmetric(obj, empties, axis):
-    """Put every self-symmetric handle (no twin) of a rig symmetric about ``axis`` on the nearest
-    symmetric motion (a move across the plane cannot keep the mesh symmetric); returns the
-    names of those it moved."""
+    """Put every handle of a rig symmetric about ``axis`` that has no twin across it (it is its
+    own mirror image there; a twin across another axis included) on the nearest symmetric
+    motion (a move across the plane cannot keep the mesh symmetric); returns the names of those
+    it moved."""
     moved = []
-    for empty in _lone_handles(empties):
+    for empty in _untwinned_handles(empties, axis):
         symmetric = _made_symmetric(obj, empty, axis)
         if symmetric is not None:
             world = np.array(obj.matrix_world, dtype=np.float64) @ symmetric @ handles.rest_local_of(empty)
             empty.matrix_world = Matrix(world.tolist())
             moved.append(empty.name)
     return moved
-

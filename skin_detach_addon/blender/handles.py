@@ -14,6 +14,7 @@ from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
 from ..core.held_detail import precedence
+from ..core.validation import as_ids
 
 TAG = "_skin_detach_handle"
 #: Handle targets farther than this from the object's origin are refused (float32 stores the mesh).
@@ -28,7 +29,7 @@ PIVOT = "selection median"
 def is_handle(obj):
     """``obj`` is a handle or anchor empty that is in a scene (one deleted in the viewport but kept
     alive by another object's pointer, such as its twin's, is gone)."""
-    return obj is not None and obj.type == 'EMPTY' and TAG in obj and len(obj.users_scene) > 0
+    return getattr(obj, "type", None) == 'EMPTY' and TAG in obj and len(obj.users_scene) > 0
 
 
 def owner(empty):
@@ -47,14 +48,12 @@ def kind_of(empty):
 
 
 def _ids(empty, key, limit=None):
-    raw = np.asarray(value_of(empty, key, []))
-    if raw.size and raw.dtype.kind not in "iu":
-        raise SkinDetachError(f"handle {empty.name!r}: expected integer {key}, got {raw.dtype}; remove it")
-    ids = raw.astype(np.int64).ravel()
-    if ids.size and (ids.min() < 0 or (limit is not None and ids.max() >= limit)):
-        raise SkinDetachError(f"handle {empty.name!r}: expected {key} in [0, {limit}), got values in "
-                              f"[{ids.min()}, {ids.max()}]; remove it or Rebuild")
-    return ids
+    """(k,) int64 the ids stored under ``key``, checked: integers in [0, ``limit``) (non-negative
+    when no bound is known)."""
+    try:
+        return as_ids(f"handle {empty.name!r}", value_of(empty, key, []), limit, key)
+    except SkinDetachError as exc:
+        raise SkinDetachError(f"{exc}; remove it or Rebuild") from None
 
 
 def proxy_ids_of(empty, m=None):
@@ -70,14 +69,24 @@ def detail_ids_of(empty, n=None):
 def rest_local_of(empty):
     """(4, 4) float64 rest frame of the empty in the bound object's local space (a copy: the ID
     property it is read from may be replaced, by a Rebuild, while the array is still held)."""
+    stored = value_of(empty, "rest_local")
     try:
-        frame = np.array(value_of(empty, "rest_local"), dtype=np.float64).reshape(4, 4)
+        frame = np.array(stored, dtype=np.float64).reshape(4, 4)
     except (TypeError, ValueError):
-        frame = np.full((4, 4), np.nan)
-    if not np.isfinite(frame).all():
-        raise SkinDetachError(f"handle {empty.name!r}: expected a finite 4x4 rest frame, got unreadable or "
-                              f"non-finite values; remove it")
+        frame = None
+    if frame is None or not np.isfinite(frame).all() or not _invertible_affine(frame.tolist()):
+        got = f"{np.size(stored)} values" if frame is None else \
+            "non-finite values" if not np.isfinite(frame).all() else "a singular or not affine frame"
+        raise SkinDetachError(f"handle {empty.name!r}: expected rest_local: 16 finite numbers of an invertible "
+                              f"affine 4x4 frame, got {got if stored is not None else 'none'}; remove it or Rebuild")
     return frame
+
+
+def _invertible_affine(rows):
+    """The 4x4 ``rows`` (lists) end in (0, 0, 0, 1) and their 3x3 part has a non-zero determinant
+    (in plain floats: numpy's det costs a drag move 10 us per handle)."""
+    (a, b, c, _), (d, e, f, _), (g, h, i, _), bottom = rows
+    return bottom == [0.0, 0.0, 0.0, 1.0] and a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) != 0.0
 
 
 def handles_of(obj, proxy=None):
@@ -271,12 +280,37 @@ def has_old_pivot(empty):
     return value_of(empty, "pivot") != PIVOT and detail_ids_of(empty).size > 0
 
 
+def check_transform(obj, what="handle"):
+    """Raise unless the world matrix of ``obj`` (a handle's empty, ``what`` names it, or the bound
+    object) is finite, naming the first of its own transform fields that is not (location,
+    rotation, scale, their deltas, the parent inverse) with its values, else its parent."""
+    if np.isfinite(np.array(obj.matrix_world, dtype=np.float64)).all():
+        return
+    quaternion = obj.rotation_mode == 'QUATERNION'
+    rotation = {'QUATERNION': "rotation_quaternion", 'AXIS_ANGLE': "rotation_axis_angle"}.get(obj.rotation_mode,
+                                                                                              "rotation_euler")
+    for field in ("location", rotation, "scale", "delta_location",
+                  "delta_rotation_quaternion" if quaternion else "delta_rotation_euler", "delta_scale",
+                  "matrix_parent_inverse"):
+        values = np.array(getattr(obj, field), dtype=np.float64)
+        if not np.isfinite(values).all():
+            raise SkinDetachError(f"{what} {obj.name!r}: expected a finite {field}, got "
+                                  f"{tuple(float(v) for v in values.ravel())} (nothing was written); fix or undo it")
+    parent = getattr(obj.parent, "name", None)
+    raise SkinDetachError(f"{what} {obj.name!r}: expected a finite transform, got a non-finite world matrix "
+                          f"{'from its parent ' + repr(parent) if parent else 'from a constraint or driver'} "
+                          f"(nothing was written); fix or undo it")
+
+
 def local_motion(obj, empty):
-    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made."""
-    world = np.array(obj.matrix_world, dtype=np.float64)
+    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made (raises
+    naming the field when a transform is not finite)."""
+    world, placed = np.array(obj.matrix_world, dtype=np.float64), np.array(empty.matrix_world, dtype=np.float64)
+    if not (np.isfinite(world).all() and np.isfinite(placed).all()):
+        check_transform(obj, "object")
+        check_transform(empty)
     try:
-        return np.linalg.solve(world, np.array(empty.matrix_world, dtype=np.float64)) @ \
-            np.linalg.inv(rest_local_of(empty))
+        return np.linalg.solve(world, placed) @ np.linalg.inv(rest_local_of(empty))
     except np.linalg.LinAlgError:
         raise SkinDetachError(f"object {obj.name!r}: expected an invertible transform (no zero scale) for its "
                               f"handle {empty.name!r}, got a singular one") from None
@@ -290,7 +324,7 @@ def constraints(obj, empties, rest_proxy):
     ``empties`` of ``obj`` (:func:`handles_of`, oldest first). Where groups share proxy or detail
     vertices the later one in :func:`.core.held_detail.precedence` wins: the newest handle over
     older ones, anchors over handles (the held pairs come in that order)."""
-    m = rest_proxy.shape[0]
+    m, n = rest_proxy.shape[0], len(obj.data.vertices)
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
@@ -312,13 +346,13 @@ def constraints(obj, empties, rest_proxy):
                                       f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
             targets[ids] = moved
             groups[ids] = label
-            selected = detail_ids_of(empty)
+            selected = detail_ids_of(empty, n)
             if selected.size:
                 detail.append((label, selected, motion))
         else:
             targets[ids] = rest_proxy[ids]
             groups[ids] = 0
-            anchored.append(detail_ids_of(empty))
+            anchored.append(detail_ids_of(empty, n))
         held[ids] = True
     # One anchor's ids are stored sorted and unique already (a union costs a sort of them per move).
     if len(anchored) > 1:

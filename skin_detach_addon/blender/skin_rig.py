@@ -119,12 +119,12 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     surface = SkinDetachedSurface.build(positions, triangles, target_faces=target_faces,
                                         normal_test=normal_test, preview_vertices=preview_vertices,
                                         progress=progress)
-    old = []  # (empty, its detail ids or None): read before anything changes
+    old = []  # (empty, its detail ids or None, its mirror axis): read before anything changes
     for empty in handles.handles_of(obj):
         try:
-            old.append((empty, handles.detail_ids_of(empty, surface.n_detail)))
+            old.append((empty, handles.detail_ids_of(empty, surface.n_detail), handle_symmetry.mirror_of(empty)))
         except SkinDetachError:
-            old.append((empty, None))  # damaged: removed below
+            old.append((empty, None, ""))  # damaged: removed below
     _remove_proxy(obj)
     proxy = _make_proxy(obj, surface)
     preview = None if surface.preview is None else _make_preview(obj, surface.preview)
@@ -134,10 +134,10 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     mesh_io.write_stretch(obj.data, np.zeros(positions.shape[0], dtype=np.float32))
     kept = removed = 0
     centers = {}
-    for empty, detail in old:
+    for empty, detail, axis in old:
         if detail is not None and detail.size:
             ids = held_proxy_vertices(surface, detail)
-            twin, axis = handle_symmetry.twin_of(empty), handle_symmetry.mirror_of(empty)
+            twin = handle_symmetry.twin_of(empty)
             if twin is not None and twin.name in centers:  # the twin's, mirrored: exact
                 center = handle_symmetry.mirror_matrix(axis)[:3, :3] @ centers[twin.name]
             else:

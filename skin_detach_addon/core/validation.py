@@ -47,7 +47,7 @@ def as_triangles(name, array, n_points, narrow=False):
     low, high = int(raw.min()), int(raw.max())
     if low < 0 or high >= n_points:
         raise SkinDetachError(
-            f"{name}: expected indices in [0, {n_points - 1}], got values in [{low}, {high}]")
+            f"{name}: expected indices in [0, {n_points}), got values in [{low}, {high}]")
     return np.ascontiguousarray(raw, dtype=np.int32 if narrow and n_points <= 2**31 else np.int64)
 
 
@@ -76,15 +76,24 @@ def as_preview_vertices(preview_vertices):
     return int(preview_vertices)
 
 
-def as_vertex_ids(name, ids, n_points):
-    """``ids`` as a 1-D int64 array of indices in [0, n_points)."""
+def as_ids(name, ids, limit=None, what="ids"):
+    """``ids`` (any shape) as a flat int64 array of integers in [0, ``limit``) (any non-negative
+    int64 when ``limit`` is None; empty stays empty); ``name`` and ``what`` name them in the
+    message, which gives the values as they are (a uint64 2**63 is not read as a negative int64)."""
     raw = np.asarray(ids)
     if raw.size == 0:
-        raise SkinDetachError(f"{name}: expected at least one vertex id, got none")
+        return np.zeros(0, dtype=np.int64)
     if raw.dtype.kind not in "iu":
-        raise SkinDetachError(f"{name}: expected integer vertex ids, got dtype {raw.dtype}")
-    flat = raw.astype(np.int64).ravel()
-    low, high = int(flat.min()), int(flat.max())
-    if low < 0 or high >= n_points:
-        raise SkinDetachError(f"{name}: expected ids in [0, {n_points - 1}], got values in [{low}, {high}]")
-    return flat
+        raise SkinDetachError(f"{name}: expected integer {what}, got dtype {raw.dtype}")
+    low, high = int(raw.min()), int(raw.max())  # Python ints: exact whatever the dtype
+    if low < 0 or high >= (2**63 if limit is None else limit):
+        expected = f"{what} in [0, {limit})" if limit is not None else f"non-negative {what} below 2**63"
+        raise SkinDetachError(f"{name}: expected {expected}, got values in [{low}, {high}]")
+    return raw.astype(np.int64).ravel()
+
+
+def as_vertex_ids(name, ids, n_points):
+    """``ids`` as a 1-D int64 array of at least one index in [0, n_points)."""
+    if np.asarray(ids).size == 0:
+        raise SkinDetachError(f"{name}: expected at least one vertex id, got none")
+    return as_ids(name, ids, n_points, "vertex ids")

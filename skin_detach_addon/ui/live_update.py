@@ -11,8 +11,10 @@ move; once they have been still for :data:`IDLE_SECONDS`, :func:`settle` writes 
 """
 
 import time
+import traceback
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from .. import api
@@ -33,12 +35,14 @@ _UNSETTLED = {}
 
 
 def handle_signature(obj, proxy):
-    """Tuple of the object's world matrix, the proxy's and every handle's own (basis) matrix:
-    changes when any of them moves, by any means, and is current as soon as it is set."""
-    values = [tuple(v for col in obj.matrix_world.col for v in col),
-              tuple(v for col in proxy.matrix_basis.col for v in col)]
+    """The bytes of the object's world matrix, the proxy's and every handle's own (basis) matrix,
+    with the handles' names: changes when any of them moves, by any means, and is current as soon
+    as it is set (bytes, not floats: a NaN compares equal to itself, so a handle left at NaN is
+    solved, and reported, once)."""
+    values = [np.array(obj.matrix_world, dtype=np.float64).tobytes(),
+              np.array(proxy.matrix_basis, dtype=np.float64).tobytes()]
     for empty in api.handles_of(obj):
-        values.append((empty.name,) + tuple(v for col in empty.matrix_basis.col for v in col))
+        values.append((empty.name, np.array(empty.matrix_basis, dtype=np.float64).tobytes()))
     return tuple(values)
 
 
@@ -93,11 +97,11 @@ def flush():
                 if stats["converged"]:
                     ERRORS.pop(name, None)
                 else:
-                    ERRORS[name] = f"the last solve did not converge ({stats['iterations']} iterations)"
-                    print(f"Skin Detach live update: {obj.name}: {ERRORS[name]}")
+                    _report(name, f"the last solve did not converge ({stats['iterations']} iterations)")
             except SkinDetachError as exc:
-                ERRORS[name] = str(exc)
-                print(f"Skin Detach live update: {exc}")
+                _report(name, str(exc))
+            except Exception as exc:  # noqa: BLE001 (an internal error: said once, and live update goes on)
+                _report(name, f"internal error {type(exc).__name__}: {exc}", traceback.format_exc())
             remember(obj)  # report once, not on every later update
         _pending.clear()
     finally:
@@ -127,12 +131,19 @@ def settle(now=None, only=None, everything=False):
             api.deform(obj, bpy.context.scene.skin_detach.preserve_volume, follow=True)
             ERRORS.pop(obj.name, None)
         except SkinDetachError as exc:
-            ERRORS[obj.name] = str(exc)
-            print(f"Skin Detach live update: {exc}")
+            _report(obj.name, str(exc))
         finally:
             _state["busy"] = False
         remember(obj)
     return IDLE_SECONDS if any(api.preview_stands_in(o) for o in showing) else None
+
+
+def _report(name, message, details=""):
+    """Show ``message`` for object ``name`` in the panel; say it on the console (with ``details``,
+    a traceback) when it is new: an error that stays while handles move is said once."""
+    if ERRORS.get(name) != message:
+        print(f"{details}Skin Detach live update: {name}: {message}")
+    ERRORS[name] = message
 
 
 @persistent

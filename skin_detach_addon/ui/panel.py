@@ -5,6 +5,7 @@ import textwrap
 import bpy
 
 from .. import api
+from .idle_preparation import FAILED
 from .live_update import ERRORS
 
 
@@ -99,8 +100,9 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.reset", icon='LOOP_BACK')
         row.operator("skin_detach.clear", icon='TRASH')
-        if obj.name in ERRORS:
-            wrapped_label(box, ERRORS[obj.name], icon='ERROR')
+        for errors in (ERRORS, FAILED):
+            if obj.name in errors:
+                wrapped_label(box, errors[obj.name], icon='ERROR')
 
         figures = api.figures(obj)
         stats = figures["build"]
