@@ -400,3 +400,25 @@ def test_hand_parented_to_the_forearm_follows_a_drag_of_the_forearm(scene, armad
     assert session.event("RET", "PRESS", mouse) == FINISHED
     bpy.context.view_layer.update()
     assert_held(obj, rest, made)
+
+
+def test_a_handle_parented_to_another_handle_stays_in_the_rig(scene, armadillo):
+    """The hand's empty parented to the forearm's (Ctrl+P, Keep Transform) is still one of the
+    rig's handles (listed, solved): the forearm moved, the hand's selection follows the hand
+    empty exactly (a proxy fine enough that the hand and the forearm share no proxy face's
+    detail, so this holds apart from the overlap rule). It was dropped: only the proxy's own
+    children were looked at, and the hand followed the surface, 9.7e-4 of the diagonal off."""
+    points, triangles, parts = armadillo
+    obj = blender_mesh("armadillo", points, triangles)
+    api.build(obj, target_faces=1000)
+    made = []
+    make(obj, ANCHOR, parts["shoulder"], made=made)
+    for name in ("upper arm", "forearm", "hand"):
+        make(obj, HANDLE, parts[name], made=made)
+    forearm, hand = made[2].empty, made[3].empty
+    parent_keeping_transform(hand, forearm, "Ctrl+P Object (Keep Transform)")
+    assert hand in api.handles_of(obj) and len(api.handles_of(obj)) == 4
+    forearm.matrix_world = Matrix.Translation((0.07 * diagonal(points), 0.07 * diagonal(points), 0.0)) @ \
+        forearm.matrix_world
+    api.deform(obj)
+    assert_held(obj, points, made)

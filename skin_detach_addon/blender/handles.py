@@ -80,8 +80,9 @@ def rest_local_of(empty):
 
 
 def handles_of(obj, proxy=None):
-    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices)."""
-    pool = proxy.children if proxy is not None else _all_objects()
+    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices); with
+    ``proxy``, those under it at any depth (an artist may parent a hand's empty to the forearm's)."""
+    pool = proxy.children_recursive if proxy is not None else _all_objects()
     found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
     return sorted(found, key=lambda o: ages[o.name])
