@@ -141,6 +141,24 @@ def test_older_handle_inside_a_newer_one_follows_the_newer(scene, armadillo):
     assert_held(obj, rest, made)
 
 
+@pytest.mark.parametrize("inner_kind", [ANCHOR, HANDLE])
+def test_selection_made_inside_an_older_one_of_the_other_kind(scene, armadillo, inner_kind):
+    """An anchor made inside an older handle (the head moves, an ear pinned) holds its vertices at
+    rest; a handle made inside an older anchor (the body pinned, the head grabbed) carries its
+    own: the newest selection wins, the rest of the older one does what the older says."""
+    obj, rest = bound(armadillo)
+    made = []
+    outer_kind = HANDLE if inner_kind == ANCHOR else ANCHOR
+    if outer_kind == HANDLE:
+        make(obj, ANCHOR, base(rest), made=made)
+    outer = make(obj, outer_kind, head(rest, 0.32), made=made)
+    inner = make(obj, inner_kind, head(rest, 0.08), made=made)
+    grip = outer if outer_kind == HANDLE else inner
+    move(grip.empty, np.array((0.05, 0.04, -0.03)) * diagonal(rest), (0, 0, 25))
+    api.deform(obj)
+    assert_held(obj, rest, made)
+
+
 def tiny_selection(rest, count):
     """``count`` vertices nearest the middle of the armadillo's chest side (a spot a few edges across)
     and the anchored patch around them (within 4 % of the diagonal, the selection left out)."""
