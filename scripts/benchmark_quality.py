@@ -41,7 +41,7 @@ timed), ``--face-drags`` of them dragged by 3 % of the diagonal. After every con
 handle's off (the largest distance of a vertex it owns, the newest selection containing it, from
 where its empty's motion in the object's local space puts it, over the rest diagonal) and each
 anchor's motion (bench/rigs.py held_errors); per rig the worst of them over its confirms, the
-move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (RIG_GOALS).
+move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (bench/rigs.py GOALS).
 """
 
 import argparse
@@ -66,9 +66,6 @@ from skin_detach_addon.core.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 RIG_MESHES = "armadillo,armadillo-300K"
-#: Goal name -> (figure of a rigs row, the goal it must not pass); a figure the row lacks is not judged.
-RIG_GOALS = {"off": ("worst_off", 1e-5), "anchor": ("worst_anchor", 1e-5), "Add Handle": ("add_handle_s_max", 0.5),
-             "move": ("move_ms_median", 16.0), "confirm": ("confirm_ms_max", 150.0)}
 
 
 def mesh(name, at_least):
@@ -359,15 +356,9 @@ def rig_rows(name, faces, moves, face_handles, face_drags):
     return rows
 
 
-def rig_fails(row):
-    """The goals (RIG_GOALS) ``row`` fails."""
-    if "refused" in row:
-        return ["refused"]
-    return [goal for goal, (key, limit) in RIG_GOALS.items() if key in row and not row[key] <= limit]
-
-
 def rig_line(row):
     """A table row of a rigs row."""
+    from bench.rigs import failed_goals
     if "refused" in row:
         return (f"| {row['mesh']} | {row['vertices']:,} | {row['target_faces']} | {row['rig']} | refused: "
                 f"{row['refused'][:120]} |" + " - |" * 6)
@@ -378,7 +369,7 @@ def rig_line(row):
     return (f"| {row['mesh']} | {row['vertices']:,} | {row['proxy_faces']} | {row['rig']} | "
             f"{row['handles']} + {row['anchors']} | "
             f"{row['worst_off']:.1e} | {row['worst_anchor']:.1e} | {moving} | {added} | "
-            f"{', '.join(rig_fails(row)) or 'none'} |")
+            f"{', '.join(failed_goals(row)) or 'none'} |")
 
 
 def run_rigs(args):
