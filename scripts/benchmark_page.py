@@ -4,8 +4,8 @@
 
 Reads ``drag.json`` (scripts/benchmark_drag.py --json), ``quality.json``
 (scripts/benchmark_quality.py --json), ``rigs.json`` (scripts/benchmark_quality.py --rigs --json)
-and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is there), each with the command, date, machine and versions it was measured with
-(bench/report.py), and writes a section per benchmark, one table per measurement under that
+and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is
+there), each with the command, date, machine and versions it was measured with (bench/report.py), and writes a section per benchmark, one table per measurement under that
 heading. ``make bench`` measures drag, quality and rigs and runs this; the scale benchmark is run by
 hand (long, and its large rows need a larger machine).
 """

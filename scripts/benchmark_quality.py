@@ -58,6 +58,7 @@ from bench.arap import arap_reference
 from bench.meshes import named, subdivide
 from bench.poses import pose_suite
 from bench.quality import bend_quality
+from bench.rigs import base, failed_goals, falloff, head, held_errors, limb, make, spots, weighted_group
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
@@ -224,7 +225,6 @@ class RigRun:
         self.view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
 
     def add(self, kind, ids=None, group=None):
-        from bench.rigs import make
         return make(self.obj, kind, ids, group, self.made)
 
     def drag(self, held, pixels, moves, keys=()):
@@ -253,14 +253,16 @@ class RigRun:
         self.measure()
 
     def measure(self):
-        from bench.rigs import held_errors
+        """Keep the worst held errors so far: over the handles, the anchors and per empty."""
+        per = self.worst.setdefault("per_handle", {})
         for error in held_errors(self.obj, self.rest, self.made):
-            key = ("worst_off" if error["kind"] == "HANDLE" else "worst_anchor")
+            key = "worst_off" if error["kind"] == "HANDLE" else "worst_anchor"
             self.worst[key] = max(self.worst.get(key, 0.0), error["off"])
-            self.worst.setdefault("per_handle", {})
-            self.worst["per_handle"][error["name"]] = max(self.worst["per_handle"].get(error["name"], 0.0), error["off"])
+            per[error["name"]] = max(per.get(error["name"], 0.0), error["off"])
 
     def row(self, **extra):
+        """The rig's figures (dict): counts, worst off and anchor motion (and per empty), the drags'
+        move ms median and p95 and confirm ms median and max, and ``extra``."""
         handles = sum(held.kind == "HANDLE" for held in self.made)
         out = dict(vertices=int(self.rest.shape[0]), proxy_faces=self.proxy_faces, handles=handles,
                    anchors=len(self.made) - handles, worst_off=self.worst.get("worst_off", 0.0),
@@ -276,7 +278,6 @@ TURN_30 = ("R", "THREE", "ZERO")
 
 def limb_rig(name, points, triangles, faces, moves):
     """The limb: shoulder anchor, upper arm, forearm, hand; each handle dragged in turn (G, then R 30)."""
-    from bench.rigs import limb
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", parts["shoulder"])
@@ -290,8 +291,6 @@ def limb_rig(name, points, triangles, faces, moves):
 def parented_rig(name, points, triangles, faces, moves):
     """The limb with the hand's empty parented to the forearm's (Ctrl+P, Keep Transform); the forearm dragged."""
     import bpy
-
-    from bench.rigs import limb
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", parts["shoulder"])
@@ -309,7 +308,6 @@ def parented_rig(name, points, triangles, faces, moves):
 
 def weighted_rig(name, points, triangles, faces, moves):
     """Two painted groups sharing the forearm (weights 1 to 0.2), a handle from each; each dragged."""
-    from bench.rigs import falloff, limb, weighted_group
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     upper = np.union1d(parts["upper arm"], parts["forearm"])
@@ -325,7 +323,6 @@ def weighted_rig(name, points, triangles, faces, moves):
 
 def face_rig(name, points, triangles, faces, moves, count, drags):
     """The feet anchored, ``count`` small handles over the head, each Add Handle timed; ``drags`` of them dragged."""
-    from bench.rigs import base, head, spots
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", base(points))
     added, grips = [], []
@@ -358,7 +355,6 @@ def rig_rows(name, faces, moves, face_handles, face_drags):
 
 def rig_line(row):
     """A table row of a rigs row."""
-    from bench.rigs import failed_goals
     if "refused" in row:
         return (f"| {row['mesh']} | {row['vertices']:,} | {row['target_faces']} | {row['rig']} | refused: "
                 f"{row['refused'][:120]} |" + " - |" * 6)
@@ -379,9 +375,9 @@ def run_rigs(args):
     if not hasattr(bpy.types.Scene, "skin_detach"):
         skin_detach_addon.register()
     print("## Rigs artists build (off and anchor motion over the diagonal)\n")
-    print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) | worst anchor motion (<= 1e-5) "
-          "| move ms median (<= 16) / p95 | confirm ms median / max (<= 150) | Add Handle s max (<= 0.5) / median "
-          "| fails |")
+    print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) "
+          "| worst anchor motion (<= 1e-5) | move ms median (<= 16) / p95 | confirm ms median / max (<= 150) "
+          "| Add Handle s max (<= 0.5) / median | fails |")
     print("|---" * 11 + "|")
     rows = []
     for name in [n for n in args.rigs.split(",") if n]:
