@@ -36,11 +36,17 @@ def armadillo():
     return points.astype(np.float32).astype(np.float64), triangles, limb(points, triangles)
 
 
-def bound(armadillo, scale=(1.0, 1.0, 1.0)):
-    """The armadillo as a Blender object (object scale ``scale``, unapplied), built: (obj, rest (n, 3))."""
+def bound(armadillo, scale=(1.0, 1.0, 1.0), parent_scale=None):
+    """The armadillo as a Blender object (object scale ``scale``, unapplied; under an empty scaled
+    ``parent_scale`` if given), built: (obj, rest (n, 3))."""
     points, triangles, _ = armadillo
     obj = blender_mesh("armadillo", points, triangles)
     obj.scale = scale
+    if parent_scale is not None:
+        parent = bpy.data.objects.new("scaled parent", None)
+        bpy.context.scene.collection.objects.link(parent)
+        parent.scale = parent_scale
+        obj.parent = parent
     bpy.context.view_layer.update()
     api.build(obj, target_faces=FACES)
     return obj, points
@@ -230,9 +236,9 @@ def test_hand_parented_to_the_forearm_follows_its_world_transform(scene, armadil
     assert_held(obj, rest, made)
 
 
-def head_rig(armadillo, scale=(1.0, 1.0, 1.0)):
+def head_rig(armadillo, scale=(1.0, 1.0, 1.0), parent_scale=None):
     """The armadillo's feet anchored and its head on a handle: (obj, rest, made, the head's Held)."""
-    obj, rest = bound(armadillo, scale)
+    obj, rest = bound(armadillo, scale, parent_scale)
     made = []
     make(obj, ANCHOR, base(rest), made=made)
     grip = make(obj, HANDLE, head(rest), made=made)
@@ -329,10 +335,13 @@ def test_object_with_unapplied_non_uniform_scale_and_its_handle_turned_90_degree
     assert_held(obj, rest, made)
 
 
-def test_object_with_unapplied_non_uniform_scale_and_r_90_typed_in_a_drag(scene, armadillo):
-    """obj.scale (1, 2, 1), R 90 typed in a top view: the head turns 90 degrees about the view
-    axis in the world, rigidly, exactly (or the turn is refused naming the scale, nothing moved)."""
-    obj, rest, made, grip = head_rig(armadillo, scale=(1.0, 2.0, 1.0))
+@pytest.mark.parametrize("where", ["object scale (1, 2, 1)", "parent scale (1, 2, 1)"])
+def test_object_with_unapplied_non_uniform_scale_and_r_90_typed_in_a_drag(scene, armadillo, where):
+    """obj.scale (1, 2, 1), or the object under a parent scaled so, R 90 typed in a top view: the
+    head turns 90 degrees about the view axis in the world, rigidly, exactly (or the turn is
+    refused naming the scale, nothing moved)."""
+    scaled = dict(scale=(1.0, 2.0, 1.0)) if where.startswith("object") else dict(parent_scale=(1.0, 2.0, 1.0))
+    obj, rest, made, grip = head_rig(armadillo, **scaled)
     api.deform(obj)
     before = positions(obj)
     try:
