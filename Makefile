@@ -50,6 +50,7 @@ test42: $(VENV42)/.installed
 bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_drag.py --json bench/results/drag.json
 	$(PY) scripts/benchmark_quality.py --poses 100 --json bench/results/quality.json
+	$(PY) scripts/benchmark_quality.py --rigs --json bench/results/rigs.json
 	$(PY) scripts/benchmark_page.py
 
 extension: $(VENV)/.installed

@@ -19,6 +19,10 @@ from scipy.spatial import cKDTree
 
 from skin_detach_addon.core.geometry import unique_edges
 
+#: The goals of issue 43: name -> (figure of a rigs row of scripts/benchmark_quality.py --rigs, the
+#: value it must not pass); a figure the row lacks is not judged.
+GOALS = {"off": ("worst_off", 1e-5), "anchor": ("worst_anchor", 1e-5), "Add Handle": ("add_handle_s_max", 0.5),
+         "move": ("move_ms_median", 16.0), "confirm": ("confirm_ms_max", 150.0)}
 #: Geodesic bands of a limb from its tip, fractions of the diagonal: hand, forearm, upper arm,
 #: (a free band), the shoulder's anchor.
 LIMB_BANDS = {"hand": (0.0, 0.08), "forearm": (0.08, 0.16), "upper arm": (0.16, 0.24), "shoulder": (0.28, 0.36)}
@@ -162,3 +166,10 @@ def worst(errors, kind):
     """The largest ``off`` of :func:`held_errors` over the handles (kind "HANDLE") or anchors."""
     return max((e["off"] for e in errors if e["kind"] == kind), default=0.0)
 
+
+
+def failed_goals(row):
+    """The :data:`GOALS` a rigs row fails (["refused"] when the add-on refused the rig)."""
+    if "refused" in row:
+        return ["refused"]
+    return [goal for goal, (key, limit) in GOALS.items() if key in row and not row[key] <= limit]

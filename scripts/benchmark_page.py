@@ -3,10 +3,10 @@
     python scripts/benchmark_page.py [--results bench/results] [--out docs/benchmarks.md] [--check]
 
 Reads ``drag.json`` (scripts/benchmark_drag.py --json), ``quality.json``
-(scripts/benchmark_quality.py --json) and ``scale.json`` (scripts/benchmark_scale.py --json) from
-the results folder, each with the command, date, machine and versions it was measured with
-(bench/report.py), and writes a section per benchmark, one table per measurement under that
-heading. ``make bench`` measures drag and quality and runs this; the scale benchmark is run by
+(scripts/benchmark_quality.py --json), ``rigs.json`` (scripts/benchmark_quality.py --rigs --json)
+and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is
+there), each with the command, date, machine and versions it was measured with (bench/report.py), and writes a section per benchmark, one table per measurement under that
+heading. ``make bench`` measures drag, quality and rigs and runs this; the scale benchmark is run by
 hand (long, and its large rows need a larger machine).
 """
 
@@ -20,6 +20,7 @@ sys.path.insert(0, str(ROOT))  # the repository root: bench
 
 from bench.report import table  # noqa: E402
 from bench.scale_tables import tables  # noqa: E402
+from bench.rigs import failed_goals  # noqa: E402
 
 
 def heading(meta):
@@ -107,6 +108,32 @@ def quality_section(data):
             ("\nTotals over the meshes every method has:\n\n" + table(totals, rows["totals"]) if "totals" in rows else ""))
 
 
+def rigs_section(data):
+    columns = [
+        ("mesh", lambda r: r["mesh"]), ("vertices", lambda r: f"{r['vertices']:,}"),
+        ("proxy faces", lambda r: str(r.get("proxy_faces", r["target_faces"]))), ("rig", lambda r: r["rig"]),
+        ("handles + anchors", lambda r: f"{r['handles']} + {r['anchors']}" if "handles" in r else "-"),
+        ("worst off (diag)", lambda r: f"{r['worst_off']:.1e}" if "worst_off" in r else r["refused"][:80]),
+        ("worst anchor motion (diag)", lambda r: f"{r['worst_anchor']:.1e}" if "worst_anchor" in r else "-"),
+        ("move ms median / p95", lambda r: f"{r['move_ms_median']:.1f} / {r['move_ms_p95']:.1f}"
+         if "move_ms_median" in r else "-"),
+        ("confirm ms median / max", lambda r: f"{r['confirm_ms_median']:.0f} / {r['confirm_ms_max']:.0f}"
+         if "confirm_ms_median" in r else "-"),
+        ("Add Handle s max / median", lambda r: f"{r['add_handle_s_max']:.2f} / {r['add_handle_s_median']:.2f}"
+         if "add_handle_s_max" in r else "-"),
+        ("fails", lambda r: ", ".join(failed_goals(r)) or "none"),
+    ]
+    return ("## Rigs artists build\n\nEach rig on a fresh build, every drag a DragSession (30 mouse moves, then "
+            "Enter): a limb of three adjacent handles (upper arm, forearm, hand) and a shoulder anchor, each handle "
+            "dragged in turn (G by 10 % of the diagonal, then R 30 typed); the same limb with the hand's empty "
+            "parented to the forearm's, the forearm dragged; two painted vertex groups sharing the forearm, a handle "
+            "from each; a face rig of 48 small handles over the head, each Add Handle timed, four of them dragged. "
+            "Off: the largest distance of a vertex a handle owns (the newest selection containing it) from where its "
+            "empty's transform puts it, over the diagonal; anchor motion likewise. Goals: off and anchor motion <= "
+            "1e-5, Add Handle <= 0.5 s, move median <= 16 ms, confirm <= 150 ms.\n\n" + heading(data["meta"]) + "\n" +
+            table(columns, data["rows"]["rigs"]))
+
+
 def scale_section(data):
     return ("## Scale: Table 1, Blender's stack side by side, the modal drag at millions\n\n" + heading(data["meta"]) +
             tables(data["rows"]))
@@ -117,7 +144,7 @@ def page(results):
              "`bench/results/` (`make bench` measures the drag and the quality again and rewrites the page; the scale "
              "benchmark, `python scripts/benchmark_scale.py`, is long and run by hand with `--json` into the same "
              "folder); do not edit it by hand.\n"]
-    for name, render in (("drag.json", drag_section), ("quality.json", quality_section),
+    for name, render in (("drag.json", drag_section), ("quality.json", quality_section), ("rigs.json", rigs_section),
                          ("scale.json", scale_section)):
         path = results / name
         if path.exists():

@@ -41,7 +41,7 @@ timed), ``--face-drags`` of them dragged by 3 % of the diagonal. After every con
 handle's off (the largest distance of a vertex it owns, the newest selection containing it, from
 where its empty's motion in the object's local space puts it, over the rest diagonal) and each
 anchor's motion (bench/rigs.py held_errors); per rig the worst of them over its confirms, the
-move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (RIG_GOALS).
+move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (bench/rigs.py GOALS).
 """
 
 import argparse
@@ -58,6 +58,7 @@ from bench.arap import arap_reference
 from bench.meshes import named, subdivide
 from bench.poses import pose_suite
 from bench.quality import bend_quality
+from bench.rigs import base, failed_goals, falloff, head, held_errors, limb, make, spots, weighted_group
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
@@ -66,9 +67,6 @@ from skin_detach_addon.core.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 RIG_MESHES = "armadillo,armadillo-300K"
-#: Goal name -> (figure of a rigs row, the goal it must not pass); a figure the row lacks is not judged.
-RIG_GOALS = {"off": ("worst_off", 1e-5), "anchor": ("worst_anchor", 1e-5), "Add Handle": ("add_handle_s_max", 0.5),
-             "move": ("move_ms_median", 16.0), "confirm": ("confirm_ms_max", 150.0)}
 
 
 def mesh(name, at_least):
@@ -227,7 +225,6 @@ class RigRun:
         self.view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
 
     def add(self, kind, ids=None, group=None):
-        from bench.rigs import make
         return make(self.obj, kind, ids, group, self.made)
 
     def drag(self, held, pixels, moves, keys=()):
@@ -256,14 +253,16 @@ class RigRun:
         self.measure()
 
     def measure(self):
-        from bench.rigs import held_errors
+        """Keep the worst held errors so far: over the handles, the anchors and per empty."""
+        per = self.worst.setdefault("per_handle", {})
         for error in held_errors(self.obj, self.rest, self.made):
-            key = ("worst_off" if error["kind"] == "HANDLE" else "worst_anchor")
+            key = "worst_off" if error["kind"] == "HANDLE" else "worst_anchor"
             self.worst[key] = max(self.worst.get(key, 0.0), error["off"])
-            self.worst.setdefault("per_handle", {})
-            self.worst["per_handle"][error["name"]] = max(self.worst["per_handle"].get(error["name"], 0.0), error["off"])
+            per[error["name"]] = max(per.get(error["name"], 0.0), error["off"])
 
     def row(self, **extra):
+        """The rig's figures (dict): counts, worst off and anchor motion (and per empty), the drags'
+        move ms median and p95 and confirm ms median and max, and ``extra``."""
         handles = sum(held.kind == "HANDLE" for held in self.made)
         out = dict(vertices=int(self.rest.shape[0]), proxy_faces=self.proxy_faces, handles=handles,
                    anchors=len(self.made) - handles, worst_off=self.worst.get("worst_off", 0.0),
@@ -279,7 +278,6 @@ TURN_30 = ("R", "THREE", "ZERO")
 
 def limb_rig(name, points, triangles, faces, moves):
     """The limb: shoulder anchor, upper arm, forearm, hand; each handle dragged in turn (G, then R 30)."""
-    from bench.rigs import limb
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", parts["shoulder"])
@@ -293,8 +291,6 @@ def limb_rig(name, points, triangles, faces, moves):
 def parented_rig(name, points, triangles, faces, moves):
     """The limb with the hand's empty parented to the forearm's (Ctrl+P, Keep Transform); the forearm dragged."""
     import bpy
-
-    from bench.rigs import limb
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", parts["shoulder"])
@@ -312,7 +308,6 @@ def parented_rig(name, points, triangles, faces, moves):
 
 def weighted_rig(name, points, triangles, faces, moves):
     """Two painted groups sharing the forearm (weights 1 to 0.2), a handle from each; each dragged."""
-    from bench.rigs import falloff, limb, weighted_group
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     upper = np.union1d(parts["upper arm"], parts["forearm"])
@@ -328,7 +323,6 @@ def weighted_rig(name, points, triangles, faces, moves):
 
 def face_rig(name, points, triangles, faces, moves, count, drags):
     """The feet anchored, ``count`` small handles over the head, each Add Handle timed; ``drags`` of them dragged."""
-    from bench.rigs import base, head, spots
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", base(points))
     added, grips = [], []
@@ -359,13 +353,6 @@ def rig_rows(name, faces, moves, face_handles, face_drags):
     return rows
 
 
-def rig_fails(row):
-    """The goals (RIG_GOALS) ``row`` fails."""
-    if "refused" in row:
-        return ["refused"]
-    return [goal for goal, (key, limit) in RIG_GOALS.items() if key in row and not row[key] <= limit]
-
-
 def rig_line(row):
     """A table row of a rigs row."""
     if "refused" in row:
@@ -378,7 +365,7 @@ def rig_line(row):
     return (f"| {row['mesh']} | {row['vertices']:,} | {row['proxy_faces']} | {row['rig']} | "
             f"{row['handles']} + {row['anchors']} | "
             f"{row['worst_off']:.1e} | {row['worst_anchor']:.1e} | {moving} | {added} | "
-            f"{', '.join(rig_fails(row)) or 'none'} |")
+            f"{', '.join(failed_goals(row)) or 'none'} |")
 
 
 def run_rigs(args):
@@ -388,9 +375,9 @@ def run_rigs(args):
     if not hasattr(bpy.types.Scene, "skin_detach"):
         skin_detach_addon.register()
     print("## Rigs artists build (off and anchor motion over the diagonal)\n")
-    print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) | worst anchor motion (<= 1e-5) "
-          "| move ms median (<= 16) / p95 | confirm ms median / max (<= 150) | Add Handle s max (<= 0.5) / median "
-          "| fails |")
+    print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) "
+          "| worst anchor motion (<= 1e-5) | move ms median (<= 16) / p95 | confirm ms median / max (<= 150) "
+          "| Add Handle s max (<= 0.5) / median | fails |")
     print("|---" * 11 + "|")
     rows = []
     for name in [n for n in args.rigs.split(",") if n]:

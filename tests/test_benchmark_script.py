@@ -98,8 +98,9 @@ def test_quality_benchmark_rigs_option_measures_every_rig_on_a_small_mesh(tmp_pa
     saved = json.loads((tmp_path / "r.json").read_text())
     assert saved["meta"]["command"].startswith("python ") and "bpy" in saved["meta"]["versions"]
     rows = saved["rows"]["rigs"]
-    assert [r["rig"] for r in rows] == ["limb: 3 adjacent handles + shoulder anchor", "hand parented to the forearm's empty",
-                                        "weighted vertex groups (overlapping)", "face rig: 6 small handles"]
+    assert [r["rig"] for r in rows] == ["limb: 3 adjacent handles + shoulder anchor",
+                                        "hand parented to the forearm's empty", "weighted vertex groups (overlapping)",
+                                        "face rig: 6 small handles"]
     for row in rows:
         assert row["mesh"] == "spot" and row["target_faces"] == 300 and "refused" not in row
         assert row["worst_off"] >= 0 and row["worst_anchor"] >= 0 and row["move_ms_median"] > 0

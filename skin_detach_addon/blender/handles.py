@@ -91,7 +91,8 @@ def _invertible_affine(rows):
 
 def handles_of(obj, proxy=None):
     """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices; see
-    :func:`.core.held_detail.precedence`), also those parented to another handle's empty."""
+    :func:`.core.held_detail.precedence`); with ``proxy``, those under it at any depth (an artist
+    may parent a hand's empty to the forearm's)."""
     pool = proxy.children_recursive if proxy is not None else _all_objects()
     found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
