@@ -27,7 +27,7 @@ from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession, mov
 from .blender.skin_rig import PREVIEW_ABOVE
 from .core import threads
 from .core.errors import SkinDetachError
-from .core.held_detail import held_proxy_vertices, precedence
+from .core.held_detail import held_proxy_vertices
 from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
@@ -327,28 +327,24 @@ def _check_handle(empty):
 
 def handle_conflicts(obj):
     """Handles and anchors of ``obj`` that share proxy vertices: a list of dicts (loser, winner:
-    the empties' names; shared: how many proxy vertices). The rule of
-    :func:`.core.held_detail.precedence`: an anchor beats a handle (anchors never move); between
-    two handles the newer wins."""
+    the empties' names; shared: how many proxy vertices). The newer one wins, whatever its kind
+    (the rule of :func:`.core.held_detail.owned_pairs`: it also decides which one a selected mesh
+    vertex follows)."""
     empties = handles_of(obj)
     proxy = stored.proxy_of(_bound(obj))  # cheap enough for every redraw of the panel
     m = len(proxy.data.vertices) if proxy is not None else None
     sets = []
     for empty in empties:
         try:
-            sets.append((empty, set(handles.proxy_ids_of(empty, m).tolist()), handles.kind_of(empty) == handles.ANCHOR))
+            sets.append((empty, set(handles.proxy_ids_of(empty, m).tolist())))
         except SkinDetachError:
             continue  # damaged: the panel marks it, the solve refuses it
-    rank = np.empty(len(sets), dtype=np.int64)
-    rank[precedence([anchor for _, _, anchor in sets])] = np.arange(len(sets))
     out = []
-    for i, (one, one_ids, _) in enumerate(sets):
-        for j in range(i + 1, len(sets)):
-            other, other_ids, _ = sets[j]
-            shared = len(one_ids & other_ids)
+    for i, (older, older_ids) in enumerate(sets):
+        for newer, newer_ids in sets[i + 1:]:
+            shared = len(older_ids & newer_ids)
             if shared:
-                winner, loser = (other, one) if rank[j] > rank[i] else (one, other)
-                out.append({"loser": loser.name, "winner": winner.name, "shared": shared})
+                out.append({"loser": older.name, "winner": newer.name, "shared": shared})
     return out
 
 

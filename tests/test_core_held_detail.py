@@ -145,13 +145,6 @@ def test_a_layout_is_the_same_only_entry_for_entry_and_its_key_follows():
         assert Layout(other_groups, other_held).key() != layout.key()
 
 
-def test_precedence_puts_anchors_last_and_handles_oldest_first():
-    from skin_detach_addon.core.held_detail import precedence
-    # handles and anchors listed oldest first: h0, a1, h2, a3, h4
-    assert precedence([False, True, False, True, False]).tolist() == [0, 2, 4, 1, 3]
-    assert precedence([]).tolist() == []
-
-
 def test_owned_pairs_give_each_vertex_to_the_last_pair_naming_it():
     from skin_detach_addon.core.held_detail import owned_pairs
     pairs = owned_pairs([(1, np.array([5, 1, 2, 3])), (2, np.array([3, 4])), (0, np.array([2, 9]))])
@@ -177,9 +170,9 @@ def test_place_held_is_exact_under_any_affine_and_gives_rest_back_bit_for_bit():
 
 
 def test_a_selected_vertex_follows_its_own_group_not_the_one_holding_its_faces(rod):
-    """A small handle right beside the anchors: its proxy corners are the anchors' (anchors win
-    them), yet its vertices follow the handle's motion, and the anchored ones stay put, with the
-    handle's motion any affine map."""
+    """A small handle right beside the anchors, the anchors made after it: its proxy corners are
+    the anchors' (the newer wins them), yet its vertices follow the handle's motion, and the
+    anchored ones stay put, with the handle's motion any affine map."""
     from skin_detach_addon.core.held_detail import Layout, place_held
     points, _, surface, anchors, _ = rod
     z = points[:, 2]

@@ -13,7 +13,6 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.errors import SkinDetachError
-from ..core.held_detail import precedence
 from ..core.validation import as_ids
 
 TAG = "_skin_detach_handle"
@@ -91,7 +90,7 @@ def _invertible_affine(rows):
 
 def handles_of(obj, proxy=None):
     """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices; see
-    :func:`.core.held_detail.precedence`); with ``proxy``, those under it at any depth (an artist
+    :func:`.core.held_detail.owned_pairs`); with ``proxy``, those under it at any depth (an artist
     may parent a hand's empty to the forearm's)."""
     pool = proxy.children_recursive if proxy is not None else _all_objects()
     found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
@@ -320,24 +319,20 @@ def local_motion(obj, empty):
 def constraints(obj, empties, rest_proxy):
     """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, the rigid group
     of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), and the held
-    detail: (group label, detail ids (h,), (4, 4) local motion) per group made from detail
-    vertices (the anchors' together, motion the identity), from the handle and anchor
-    ``empties`` of ``obj`` (:func:`handles_of`, oldest first). Where groups share proxy or detail
-    vertices the later one in :func:`.core.held_detail.precedence` wins: the newest handle over
-    older ones, anchors over handles (the held pairs come in that order)."""
+    detail: (group label, detail ids (h,), (4, 4) local motion) per handle or anchor made from
+    detail vertices (an anchor's motion the identity), from the handle and anchor ``empties`` of
+    ``obj`` (:func:`handles_of`, oldest first) in that order: where they share proxy or detail
+    vertices the newer wins (:func:`.core.held_detail.owned_pairs`)."""
     m, n = rest_proxy.shape[0], len(obj.data.vertices)
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
-    anchored, detail = [], []
-    kinds = [kind_of(empty) for empty in empties]
-    order = precedence([kind == ANCHOR for kind in kinds])
-    for label, index in enumerate(order, start=1):
-        empty = empties[index]
+    detail = []
+    for label, empty in enumerate(empties, start=1):
         ids = proxy_ids_of(empty, m)
         if ids.size == 0:
             raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids, got none; remove it or Rebuild")
-        if kinds[index] == HANDLE:
+        if kind_of(empty) == HANDLE:
             motion = local_motion(obj, empty)
             moved = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
             if not np.isfinite(motion).all() or not np.isfinite(moved).all() or \
@@ -345,21 +340,13 @@ def constraints(obj, empties, rest_proxy):
                 raise SkinDetachError(f"handle {empty.name!r}: expected a transform that keeps its vertices finite "
                                       f"and within {MAX_COORDINATE:g} of the origin, got one that moves them to "
                                       f"{np.nanmax(np.abs(moved)) if np.isfinite(moved).any() else 'inf'}")
-            targets[ids] = moved
-            groups[ids] = label
-            selected = detail_ids_of(empty, n)
-            if selected.size:
-                detail.append((label, selected, motion))
         else:
-            targets[ids] = rest_proxy[ids]
-            groups[ids] = 0
-            anchored.append(detail_ids_of(empty, n))
+            label, motion, moved = 0, np.eye(4), rest_proxy[ids]
+        targets[ids] = moved
+        groups[ids] = label
         held[ids] = True
-    # One anchor's ids are stored sorted and unique already (a union costs a sort of them per move).
-    if len(anchored) > 1:
-        anchored = [np.unique(np.concatenate(anchored))]
-    anchored = anchored[0] if anchored else np.zeros(0, dtype=np.int64)
-    if anchored.size:
-        detail.append((0, anchored, np.eye(4)))
+        selected = detail_ids_of(empty, n)
+        if selected.size:
+            detail.append((label, selected, motion))
     ids = np.flatnonzero(held)
     return ids, targets[ids], groups, detail

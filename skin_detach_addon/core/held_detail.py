@@ -12,10 +12,11 @@ the free proxy around its border towards the handle's motion
 face its handle holds whole (:func:`held_rows`), so it lands exactly where the handle puts it;
 the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
 
-Which handle or anchor a detail vertex follows, the one rule (:func:`precedence`,
+Which handle or anchor a detail vertex follows, the one rule (:func:`owned_pairs`,
 :meth:`Layout.owned`): a vertex follows the group whose selection names it, never a neighbour's
-group that merely carries its proxy faces; where selections overlap, an anchor wins over every
-handle (anchors never move) and the newest handle over older ones. The same order decides which
+group that merely carries its proxy faces; where selections overlap, the newest handle or anchor
+wins (a handle made inside a pinned body carries its part, an anchor made inside a handle pins
+its part; an anchored vertex no newer selection names never moves). The same order decides which
 group holds a proxy vertex two of them claim. Every selected vertex is then placed by its group's
 whole affine motion from its rest position (:func:`place_held`): exact under any transform an
 empty can hold (non-uniform or negative scale, shear from parents), whatever the proxy does.
@@ -78,15 +79,6 @@ class Layout:
         if self._owned is None:
             self._owned = owned_pairs(self.held)
         return self._owned
-
-
-def precedence(is_anchor):
-    """(g,) int64 the order in which groups override each other on shared detail and proxy vertices,
-    given ``is_anchor`` (g,) bool of handles and anchors listed oldest first: every handle, oldest
-    first, then every anchor; a later group wins over an earlier one (the newest handle over older
-    handles, any anchor over any handle: anchors never move)."""
-    is_anchor = np.asarray(is_anchor, dtype=bool)
-    return np.concatenate([np.flatnonzero(~is_anchor), np.flatnonzero(is_anchor)])
 
 
 def owned_pairs(held):
