@@ -303,17 +303,31 @@ def check_transform(obj, what="handle"):
 
 
 def local_motion(obj, empty):
-    """(4, 4) rigid motion of a handle in the local space of ``obj`` since it was made (raises
-    naming the field when a transform is not finite)."""
-    world, placed = np.array(obj.matrix_world, dtype=np.float64), np.array(empty.matrix_world, dtype=np.float64)
+    """(4, 4) motion of a handle in the local space of ``obj`` since it was made (raises naming
+    the field when a transform is not finite)."""
+    return local_motions(obj, [empty])[0]
+
+
+def local_motions(obj, empties):
+    """(e, 4, 4) the motion of each handle of ``empties`` in the local space of ``obj`` since it
+    was made, ``obj_world^-1 @ empty_world @ rest_local^-1`` (raises naming the field when a
+    transform is not finite, or the handle when it is singular): one inversion of the object's
+    matrix and one batched one of the rest frames for all of them (a rig of 48 handles reads
+    them on every drag move)."""
+    world = np.array(obj.matrix_world, dtype=np.float64)
+    placed = np.array([np.array(empty.matrix_world, dtype=np.float64) for empty in empties]).reshape(-1, 4, 4)
+    rest = np.array([rest_local_of(empty) for empty in empties]).reshape(-1, 4, 4)
     if not (np.isfinite(world).all() and np.isfinite(placed).all()):
         check_transform(obj, "object")
-        check_transform(empty)
+        for empty in empties:
+            check_transform(empty)
     try:
-        return np.linalg.solve(world, placed) @ np.linalg.inv(rest_local_of(empty))
+        return np.linalg.solve(world, placed) @ np.linalg.inv(rest)
     except np.linalg.LinAlgError:
+        singular = [e.name for e, m in zip(empties, placed) if abs(np.linalg.det(world @ m)) == 0.0] or \
+            [e.name for e in empties]
         raise SkinDetachError(f"object {obj.name!r}: expected an invertible transform (no zero scale) for its "
-                              f"handle {empty.name!r}, got a singular one") from None
+                              f"handle {singular[0]!r}, got a singular one") from None
 
 
 def constraints(obj, empties, rest_proxy):
@@ -328,12 +342,15 @@ def constraints(obj, empties, rest_proxy):
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)
     detail = []
-    for label, empty in enumerate(empties, start=1):
+    kinds = [kind_of(empty) for empty in empties]
+    moving = [empty for empty, kind in zip(empties, kinds) if kind == HANDLE]
+    motions = iter(local_motions(obj, moving) if moving else ())
+    for label, (empty, kind) in enumerate(zip(empties, kinds), start=1):
         ids = proxy_ids_of(empty, m)
         if ids.size == 0:
             raise SkinDetachError(f"handle {empty.name!r}: expected proxy vertex ids, got none; remove it or Rebuild")
-        if kind_of(empty) == HANDLE:
-            motion = local_motion(obj, empty)
+        if kind == HANDLE:
+            motion = next(motions)
             moved = rest_proxy[ids] @ motion[:3, :3].T + motion[:3, 3]
             if not np.isfinite(motion).all() or not np.isfinite(moved).all() or \
                     np.abs(moved).max() > MAX_COORDINATE:

@@ -102,10 +102,17 @@ def place_held(out, rest, pairs, motions):
     motion [A b] in ``motions`` (one per pair), from ``rest`` (n, 3) the rest positions, computed in
     float64. Exact under any affine motion; the identity gives the rest back bit for bit."""
     for (_, ids), motion in zip(pairs, motions):
-        if ids.size:
-            motion = np.asarray(motion, dtype=np.float64)
+        if not ids.size:
+            continue
+        motion = np.asarray(motion, dtype=np.float64)
+        if np.array_equal(motion, _IDENTITY):  # an anchor: its rest, with no product
+            out[ids] = rest[ids]
+        else:
             out[ids] = rest[ids].astype(np.float64) @ motion[:3, :3].T + motion[:3, 3]
     return out
+
+
+_IDENTITY = np.eye(4)
 
 
 def layout_of(last, groups, held):
