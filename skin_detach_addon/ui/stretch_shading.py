@@ -1,10 +1,12 @@
 """The 3D Views' coloring while a stretch map is shown. Show Stretch records every 3D View's
 coloring on its screen and sets the Solid ones to Attribute (the active color attribute: the
-stretch map's); when no bound mesh shows its stretch any more (Show Stretch again, Clear Skin),
-every recorded view still on Attribute gets the coloring it had back (one the artist set to
-something else meanwhile keeps that) and the records go."""
+stretch map's); when no bound mesh shows its stretch any more (Show Stretch again, Clear Skin,
+an undo to before Show Stretch), every recorded view still on Attribute gets the coloring it had
+back (one the artist set to something else meanwhile keeps that) and the records go. After an
+undo, a redo or a file load the views follow the meshes again (:func:`sync`)."""
 
 import bpy
+from bpy.app.handlers import persistent
 
 from .. import api
 
@@ -36,10 +38,14 @@ def show():
             screen[RECORD] = record
 
 
+def _any_shown():
+    return any(api.stretch_shown(obj) for obj in api.bound_objects())
+
+
 def settle():
     """When no bound mesh shows its stretch: every recorded view still on Attribute gets its
     recorded coloring back; the records go."""
-    if any(api.stretch_shown(obj) for obj in api.bound_objects()):
+    if _any_shown():
         return
     for screen in bpy.data.screens:
         record = screen.get(RECORD)
@@ -51,3 +57,28 @@ def settle():
             if shading is not None and shading.color_type == ATTRIBUTE and color != ATTRIBUTE:
                 shading.color_type = color
         del screen[RECORD]
+
+
+@persistent
+def sync(*_):
+    """The views as the meshes say (an undo, a redo or a file load changes the meshes, never the
+    views): Attribute while a bound mesh shows its stretch (:func:`show`), else given back (:func:`settle`)."""
+    if _any_shown():
+        show()
+    else:
+        settle()
+
+
+_HANDLERS = (bpy.app.handlers.undo_post, bpy.app.handlers.redo_post, bpy.app.handlers.load_post)
+
+
+def register():
+    for handlers in _HANDLERS:
+        if sync not in handlers:
+            handlers.append(sync)
+
+
+def unregister():
+    for handlers in _HANDLERS:
+        while sync in handlers:
+            handlers.remove(sync)

@@ -110,3 +110,21 @@ def test_f3_finds_show_stretch(ui):
     def press():
         yield from ui.menu_search("show stretch")
     yield from _shown_then_hidden(ui, obj, press, 'OBJECT')
+
+
+def test_undo_and_redo_of_show_stretch_take_the_views_along(ui):
+    yield from ui.setup()
+    name = (yield from _painted_rig(ui)).name
+
+    def state():
+        return _state(ui, bpy.data.objects[name])  # an undo makes every object anew
+
+    before = state()
+    yield from ui.click_button(BUTTON)
+    shown = state()
+    assert shown[:2] == ('VERTEX', STRETCH_COLORS), shown
+    yield from ui.hover_view()
+    yield from ui.press('Z', ctrl=True, wait=1.0)
+    assert state() == before, f"Ctrl+Z left {state()} instead of {before}"
+    yield from ui.press('Z', ctrl=True, shift=True, wait=1.0)
+    assert state() == shown, f"Ctrl+Shift+Z gave {state()} instead of {shown}"
