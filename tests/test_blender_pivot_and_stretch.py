@@ -108,9 +108,16 @@ def test_a_drag_cancel_puts_the_stretch_back_as_it_was(scene):
     handle.location.x += 0.5
     bpy.context.view_layer.update()
     api.deform(obj)
+    api.show_stretch(obj)
     before = api.stretch(obj).copy()
+    colors = np.empty(4 * len(rest), dtype=np.float32)
+    obj.data.color_attributes[mesh_io.STRETCH_COLORS].data.foreach_get("color", colors)
     session = DragSession(obj, handle, TopView(0.01), (0, 0))
     session.event("MOUSEMOVE", "NOTHING", (40, 0))
     api.before_save()                                         # a save mid-drag writes the shown pose
     session.event("RIGHTMOUSE", "PRESS", (40, 0))
     assert np.array_equal(api.stretch(obj), before)
+    assert np.array_equal(mesh_io.read_point_floats(obj.data, mesh_io.STRETCH), before)  # the map too
+    after = np.empty_like(colors)
+    obj.data.color_attributes[mesh_io.STRETCH_COLORS].data.foreach_get("color", after)
+    assert np.array_equal(after, colors)
