@@ -24,7 +24,9 @@ at 50K only, Laplacian Deform on the whole detail mesh). Both as ratios ours / t
 the final pose (bench/quality.py bend_quality): edge distortion, dihedral change, creases,
 handle error, volume change, RMS against libigl ARAP (10 iterations, where libigl is installed,
 at 50K). The last, settled step (a confirm's write: mesh, proxy, stretch attribute) is timed
-with the share the stretch attribute takes (``Binding.stretch`` + ``mesh_io.write_point_floats``).
+with the share the stretch attribute takes (``Binding.stretch`` + ``mesh_io.write_stretch``: the
+stretch is shown, api.show_stretch, so that every confirm writes it, as it does for an artist
+who shows it; hidden, a confirm writes none).
 
 Large: the modal drag as DragSession drives it with a fake top view: api.build seconds, its
 stages and the peak memory it adds (the Blender mesh itself not counted), the seconds adding the
@@ -83,11 +85,12 @@ def fresh_scene():
 @contextlib.contextmanager
 def stretch_timer():
     """Time the stretch attribute inside whatever runs in the block: yields a dict whose
-    "stretch_s" sums the seconds spent in ``Binding.stretch`` and in ``mesh_io.write_point_floats``
-    (the two calls ``Deformation._write`` makes for it), the product's own functions wrapped."""
+    "stretch_s" sums the seconds spent in ``Binding.stretch`` and in ``mesh_io.write_stretch``
+    (the two calls ``Deformation._write`` makes for it while it is shown), the product's own
+    functions wrapped."""
     from skin_detach_addon.blender import binding, mesh_io
     spent = {"stretch_s": 0.0}
-    originals = (binding.Binding.stretch, mesh_io.write_point_floats)
+    originals = (binding.Binding.stretch, mesh_io.write_stretch)
 
     def timed(function):
         def run(*args, **kwargs):
@@ -98,17 +101,17 @@ def stretch_timer():
                 spent["stretch_s"] += time.perf_counter() - start
         return run
 
-    binding.Binding.stretch, mesh_io.write_point_floats = timed(originals[0]), timed(originals[1])
+    binding.Binding.stretch, mesh_io.write_stretch = timed(originals[0]), timed(originals[1])
     try:
         yield spent
     finally:
-        binding.Binding.stretch, mesh_io.write_point_floats = originals
+        binding.Binding.stretch, mesh_io.write_stretch = originals
 
 
 def bind_bend(obj, target_faces, preview_above=None):
     """Build ``obj`` through the API (``preview_above``: api.build's, None for the add-on's
     Preview Above) and add the bend scenario's anchor and handle, each add preparing its layout
-    (api.prepare). Returns (figures: ``build_s``, ``build_peak_mb_added`` (what the build adds to
+    (api.prepare), and shows its stretch (untimed: every confirm then writes it). Returns (figures: ``build_s``, ``build_peak_mb_added`` (what the build adds to
     the peak memory), ``handles_s`` (the anchor and the handle added), ``stats`` (api.build's);
     scenario; handle empty)."""
     from skin_detach_addon import api
@@ -125,6 +128,7 @@ def bind_bend(obj, target_faces, preview_above=None):
     api.add_anchor(obj, scenario.anchor_ids)
     handle = api.add_handle(obj, scenario.handle_ids)
     figures["handles_s"] = time.perf_counter() - start
+    api.show_stretch(obj)
     return figures, scenario, handle
 
 

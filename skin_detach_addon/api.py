@@ -247,14 +247,18 @@ def _write_shown_pose(obj):
         preview_stand_in.end_stand_in(obj)
 
 
-def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
+def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None,
+         stretch=None):
     """Evaluate the scene at each of ``frames`` (``"1-250"``, ``"1-10,20"`` or an iterable of
     ints) and store the rebuilt mesh: ``into`` SHAPE_KEYS (one animated key per frame), OBJECTS
     (one object per frame) or FILES (``path`` like ``"out/mesh_####.obj"`` or ``.ply``, with UVs).
+    ``stretch`` (OBJECTS and FILES): True gives each frame's object or file its own frame's
+    stretch (the ``skin_detach_stretch`` attribute and its colours, as :func:`show_stretch`), False
+    none; None (default): each frame's own when ``obj`` shows its stretch, else none.
     Returns one dict per frame (frame, milliseconds, iterations, converged, volume_change,
     output). Idempotent; the mesh and the scene frame are left as they were. See
     :func:`skin_detach_addon.blender.baking.bake`."""
-    return baking.bake(_bound(obj), frames, into, path, preserve_volume, apply_modifiers, progress)
+    return baking.bake(_bound(obj), frames, into, path, preserve_volume, apply_modifiers, progress, stretch)
 
 
 def preview_stands_in(obj):
@@ -355,33 +359,29 @@ def handle_group(empty):
 
 
 def stretch(obj):
-    """(n,) float32 how much ``obj``'s mesh stretches against its rest at each vertex, as the last
-    step that stayed wrote it (a confirm, Apply, :func:`deform`, Reset) into its POINT FLOAT
-    attribute ``skin_detach_stretch``: the mean relative change of the edge lengths of the proxy
-    faces the vertex is bound to, under its skin weights (0 at rest and under rigid motion; 0.1:
-    edges about 10 % longer or shorter). Zeros before any step."""
-    obj = _bound(obj)
-    values = mesh_io.read_point_floats(obj.data, mesh_io.STRETCH)
-    return np.zeros(len(obj.data.vertices), dtype=np.float32) if values is None else values
+    """(n,) float32 how much ``obj``'s mesh (Object Mode) stretches against its rest at each
+    vertex in the pose of the last step (computed from its proxy: the mesh needs no attribute):
+    the mean relative change of the edge lengths of the proxy faces the vertex is bound to,
+    under its skin weights (0 at rest and under rigid motion; 0.1: edges about 10 % longer or
+    shorter). While it is shown (:func:`show_stretch`) the same values are in the mesh's POINT
+    FLOAT attribute ``skin_detach_stretch``, written by every step that stays."""
+    return skin_rig.current_stretch(_bound(obj))
 
 
 def show_stretch(obj, show=True):
-    """Colour ``obj``'s mesh by its :func:`stretch` (blue 0, red 0.25 or more) in a color
-    attribute ``skin_detach_stretch_color`` made the active color, kept up to date by every step
-    that stays, so that Solid shading with Attribute coloring shows a tension map; ``show=False``
-    removes it."""
-    obj = _bound(obj)
-    if show:
-        mesh_io.write_stretch_colors(obj.data, stretch(obj))
-    else:
-        mesh_io.remove_stretch_colors(obj.data)
-    obj.data.update()
+    """Show ``obj``'s :func:`stretch` (Object Mode) on its mesh: the POINT FLOAT attribute
+    ``skin_detach_stretch`` and its colours (blue 0, red 0.25 or more) in the color attribute
+    ``skin_detach_stretch_color``, made the active color (the render color stays the artist's),
+    both kept up to date by every step that stays, so that Solid shading with Attribute coloring
+    shows a tension map. Nothing is added to a mesh before. ``show=False`` removes both and makes
+    the artist's own active color and active attribute active again. (The panel's Show Stretch
+    also sets every Solid 3D View's coloring to Attribute and back.)"""
+    skin_rig.show_stretch(_bound(obj), show)
 
 
 def stretch_shown(obj):
-    """``obj``'s mesh is coloured by its stretch (:func:`show_stretch`)."""
-    obj = _bound(obj)
-    return obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is not None
+    """``obj``'s mesh shows its stretch (:func:`show_stretch`)."""
+    return mesh_io.stretch_shown(_bound(obj).data)
 
 
 def handle_has_old_pivot(empty):

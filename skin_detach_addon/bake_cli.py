@@ -19,6 +19,9 @@ ARGS:
                       in a copy of the scene, as shape keys (default) or one object per frame
   --into shape-keys|objects   what goes into a .blend output
   --apply-modifiers   export files with the object's modifiers applied (or --modifiers apply|ignore)
+  --stretch, --no-stretch   give each frame's object or PLY file its own frame's stretch map
+                      (the skin_detach_stretch attribute and its colours), or none; default: its
+                      own when the mesh shows its stretch in the file (Show Stretch), else none
   --no-volume         do not keep the volume of the proxy (default: kept, as in the panel; or
                       --volume keep|free)
   --target-faces N    proxy size when the binding has to be built (default 1000)
@@ -70,6 +73,9 @@ def parser():
     # The same two choices as values, for job templates that cannot leave an argument out.
     parser.add_argument("--modifiers", choices=("apply", "ignore"), help="apply = --apply-modifiers")
     parser.add_argument("--volume", choices=("keep", "free"), help="free = --no-volume")
+    parser.add_argument("--stretch", action=argparse.BooleanOptionalAction, default=None,
+                        help="each frame's own stretch map in objects and PLY files, or none (default: its own "
+                             "when the mesh shows its stretch)")
     parser.add_argument("--target-faces", type=int, default=1000)
     parser.add_argument("--rebuild", action="store_true")
     parser.add_argument("--farm", action="store_true", help="one chunk of a farm job: one file per frame only")
@@ -162,7 +168,8 @@ def run(args):
               f"solved in {record['milliseconds']:.1f} ms -> {record['output']}{warning}", flush=True)
 
     records = api.bake(obj, frames, into=into, path=None if to_blend else args.output,
-                       preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress)
+                       preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress,
+                       stretch=args.stretch)
     if not to_blend:
         missing = [r["frame"] for r in records if not os.path.isfile(r["output"])]
         if len(records) != len(frames) or missing:

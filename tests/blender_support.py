@@ -103,7 +103,7 @@ def all_data(mesh):
         layer.data.foreach_get("uv", uv)
         out[f"uv:{layer.name}"] = uv
     for attribute in mesh.attributes:
-        if attribute.name in ("position", mesh_io.STRETCH) or attribute.name.startswith("."):  # (the add-on's own)
+        if attribute.name == "position" or attribute.name.startswith("."):
             continue
         if attribute.data_type in ('FLOAT', 'INT', 'BOOLEAN', 'INT8'):
             field = "value"

@@ -23,7 +23,7 @@ def test_only_positions_change(scene, make):
     assert bpy.ops.skin_detach.apply() == {'FINISHED'}
     assert np.abs(mesh_io.read_positions(obj.data) - rest).max() > 0.1
     after = all_data(obj.data)
-    assert before.keys() == after.keys() and mesh_io.STRETCH in obj.data.attributes  # and what it writes beside
+    assert before.keys() == after.keys() and mesh_io.STRETCH not in obj.data.attributes  # nothing added beside
     for key in before:
         assert np.array_equal(before[key], after[key]), key
     assert vertex_group_weights(obj) == groups

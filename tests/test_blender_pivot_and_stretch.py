@@ -65,7 +65,7 @@ def test_twins_empties_mirror_each_other_exactly_also_after_a_rebuild(scene):
         bpy.context.view_layer.update()
 
 
-def test_stretch_is_written_with_each_step_that_stays_zero_at_rest_larger_where_it_bends(scene):
+def test_stretch_is_zero_at_rest_larger_where_it_bends_and_written_by_each_step_while_shown(scene):
     obj = quad_sphere(segments=48, rings=24)
     api.build(obj, target_faces=300)
     rest = mesh_io.read_positions(obj.data).astype(np.float64)
@@ -78,20 +78,23 @@ def test_stretch_is_written_with_each_step_that_stays_zero_at_rest_larger_where_
     bpy.context.view_layer.update()
     api.deform(obj)
     stretch = api.stretch(obj)
-    assert obj.data.attributes[mesh_io.STRETCH].domain == 'POINT'
+    assert mesh_io.STRETCH not in obj.data.attributes       # nothing added until it is shown
     assert stretch.dtype == np.float32 and np.isfinite(stretch).all() and stretch.min() >= 0
     middle = np.abs(rest[:, 2]) < 0.3
     assert stretch[middle].mean() > 2 * stretch[bottom].mean() and stretch[middle].mean() > 1e-3
     api.show_stretch(obj)
     colors = obj.data.color_attributes[mesh_io.STRETCH_COLORS]
     assert obj.data.color_attributes.active_color == colors
+    assert obj.data.attributes[mesh_io.STRETCH].domain == 'POINT'
+    assert np.array_equal(mesh_io.read_point_floats(obj.data, mesh_io.STRETCH), stretch)
     api.reset(obj)
     assert np.array_equal(api.stretch(obj), np.zeros(len(rest), dtype=np.float32))
+    assert np.array_equal(mesh_io.read_point_floats(obj.data, mesh_io.STRETCH), api.stretch(obj))
     red = np.empty(4 * len(rest), dtype=np.float32)
     colors.data.foreach_get("color", red)
     assert np.abs(red[0::4]).max() == 0.0                     # the colours follow the reset
     api.show_stretch(obj, False)
-    assert obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is None
+    assert obj.data.color_attributes.get(mesh_io.STRETCH_COLORS) is None and mesh_io.STRETCH not in obj.data.attributes
 
 
 def test_a_drag_cancel_puts_the_stretch_back_as_it_was(scene):
@@ -105,9 +108,16 @@ def test_a_drag_cancel_puts_the_stretch_back_as_it_was(scene):
     handle.location.x += 0.5
     bpy.context.view_layer.update()
     api.deform(obj)
+    api.show_stretch(obj)
     before = api.stretch(obj).copy()
+    colors = np.empty(4 * len(rest), dtype=np.float32)
+    obj.data.color_attributes[mesh_io.STRETCH_COLORS].data.foreach_get("color", colors)
     session = DragSession(obj, handle, TopView(0.01), (0, 0))
     session.event("MOUSEMOVE", "NOTHING", (40, 0))
     api.before_save()                                         # a save mid-drag writes the shown pose
     session.event("RIGHTMOUSE", "PRESS", (40, 0))
     assert np.array_equal(api.stretch(obj), before)
+    assert np.array_equal(mesh_io.read_point_floats(obj.data, mesh_io.STRETCH), before)  # the map too
+    after = np.empty_like(colors)
+    obj.data.color_attributes[mesh_io.STRETCH_COLORS].data.foreach_get("color", after)
+    assert np.array_equal(after, colors)

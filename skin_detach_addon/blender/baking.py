@@ -171,7 +171,8 @@ def check_folder(argument, path):
         raise SkinDetachError(f"{argument}: expected a writable folder and file, got {path!r} (permission denied)")
 
 
-def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None):
+def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None,
+         stretch=None):
     """Bake ``obj`` (a bound mesh object) at each of ``frames``; returns one dict per frame:
     frame, milliseconds (solve + rebuild), iterations, converged, volume_change, output (the
     shape key name, object name or file path).
@@ -185,12 +186,24 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     apply_modifiers  FILES only: export with the object's modifiers applied (default: the mesh
                      itself, the same vertices in the same order as the original).
     progress         called as ``progress(done, total, record)`` after every frame.
+    stretch          OBJECTS and FILES: True: each frame's object or file carries that frame's own
+                     stretch (the stretch map's attribute and colours, made the active color, as
+                     Show Stretch makes them; a PLY file holds both), False: none (a baked object
+                     keeps the artist's own active color); None (default): True when ``obj``
+                     shows its stretch, else False. Never the pose shown when the bake started.
     """
     import bpy
 
     if into not in MODES:
         raise SkinDetachError(f"into: expected one of {', '.join(MODES)}, got {into!r}")
     frames = check_frames(frames)
+    if not isinstance(stretch, (bool, type(None))):
+        raise SkinDetachError(f"stretch: expected True, False or None, got {stretch!r}")
+    if into == SHAPE_KEYS and stretch:
+        raise SkinDetachError(f"stretch: expected False or None for {SHAPE_KEYS} (a shape key holds positions "
+                              f"only), got True; bake into {OBJECTS} or PLY files to keep each frame's stretch")
+    if stretch is None:
+        stretch = mesh_io.stretch_shown(obj.data)
     if into == FILES:
         if not path:
             raise SkinDetachError("path: expected a file name pattern such as 'out/mesh_####.obj' for FILES, got none")
@@ -208,10 +221,11 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
             scene.frame_set(frame)
             start = time.perf_counter()
             result, detail = deformation.solve()
+            stretched = deformation.binding.stretch(result.vertices) if stretch and into != SHAPE_KEYS else None
             milliseconds = 1000 * (time.perf_counter() - start)
             records.append({"frame": frame, "milliseconds": milliseconds, "iterations": result.iterations,
                             "converged": result.converged, "volume_change": result.volume_change,
-                            "output": writer.write(frame, detail)})
+                            "output": writer.write(frame, detail, stretched)})
             if progress is not None:
                 progress(len(records), len(frames), records[-1])
     except BaseException:
@@ -225,8 +239,8 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
 
 class _ShapeKeyWriter:
     """Bake writer into shape keys of the mesh. Every writer has ``write(frame, detail (n, 3)
-    float32 positions in the mesh's vertex order) -> output name`` and ``undo()``, which removes
-    what it made."""
+    float32 positions in the mesh's vertex order, stretch (n,) float32 that frame's stretch or
+    None: none) -> output name`` and ``undo()``, which removes what it made."""
 
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
@@ -234,7 +248,7 @@ class _ShapeKeyWriter:
         if obj.data.shape_keys is None:
             self.made.append(obj.shape_key_add(name="Basis", from_mix=False).name)
 
-    def write(self, frame, detail):
+    def write(self, frame, detail, stretch=None):
         blocks = self.obj.data.shape_keys.key_blocks
         name = f"{KEY_PREFIX}{frame:04d}"
         key = blocks.get(name)
@@ -276,14 +290,15 @@ def _fcurves(id_data):
 
 class _ObjectWriter:
     """Bake writer into one object per frame (a copy of the mesh object with (n, 3) positions
-    ``detail``), see :class:`_ShapeKeyWriter` for the interface."""
+    ``detail`` and the frame's ``stretch`` shown, or none), see :class:`_ShapeKeyWriter` for the
+    interface."""
 
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
         self.made = []
         self.collection = skin_rig.scene_collection(BAKE_COLLECTION)
 
-    def write(self, frame, detail):
+    def write(self, frame, detail, stretch=None):
         baked = next((o for o in self.collection.objects if BAKE_TAG in o and o[BAKE_TAG].get("owner") == self.obj
                       and o[BAKE_TAG].get("frame") == frame and len(o.data.vertices) == len(detail)), None)
         if baked is None:
@@ -300,6 +315,7 @@ class _ObjectWriter:
             self.made.append(baked.name)
         baked.matrix_world = self.obj.matrix_world.copy()
         mesh_io.write_positions(baked.data, detail)
+        _write_stretch(baked.data, stretch)
         return baked.name
 
     def undo(self):
@@ -311,15 +327,16 @@ class _ObjectWriter:
 
 
 class _FileWriter:
-    """Bake writer into one OBJ or PLY file per frame: ``detail`` (n, 3) is written into the
-    mesh (restored when the bake ends) and exported; see :class:`_ShapeKeyWriter` for the interface."""
+    """Bake writer into one OBJ or PLY file per frame: ``detail`` (n, 3) and ``stretch`` (shown,
+    or hidden when None) are written into the mesh (restored when the bake ends) and exported;
+    see :class:`_ShapeKeyWriter` for the interface."""
 
     def __init__(self, obj, path, apply_modifiers):
         self.obj = obj
         self.pattern = path
         self.apply_modifiers = bool(apply_modifiers)
 
-    def write(self, frame, detail):
+    def write(self, frame, detail, stretch=None):
         """Export to a hidden partial file beside the target, then rename it over the target: a
         frame's file is complete or absent, whenever the process is stopped (a re-run replaces
         it and removes the partial files killed bakes of this host left)."""
@@ -329,6 +346,7 @@ class _FileWriter:
         # first Worker still runs) never write or rename each other's partial file.
         partial = os.path.join(folder, f".{name}.{_PROCESS_TAG}-{next(_WRITES)}.partial{os.path.splitext(name)[1]}")
         mesh_io.write_positions(self.obj.data, detail)
+        _write_stretch(self.obj.data, stretch)
         try:
             self._export(partial, target.lower().endswith(".obj"))
             if not os.path.isfile(partial):
@@ -370,3 +388,12 @@ class _FileWriter:
 
     def undo(self):
         pass
+
+
+def _write_stretch(mesh, stretch):
+    """Show (n,) ``stretch`` on ``mesh`` (see :func:`.mesh_io.show_stretch`), or with None remove
+    the stretch map a copy carried over (:func:`.mesh_io.hide_stretch`)."""
+    if stretch is None:
+        mesh_io.hide_stretch(mesh)
+    else:
+        mesh_io.show_stretch(mesh, stretch)

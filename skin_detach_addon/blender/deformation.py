@@ -232,10 +232,11 @@ class Deformation:
         (see :class:`.mesh_guard.MeshGuard`)."""
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
         self.binding.mesh_guard.before_write(self.obj.data)
-        stretch = self.binding.stretch(proxy_positions) if mark else None
+        shown = mark and mesh_io.stretch_shown(self.obj.data)
+        stretch = self.binding.stretch(proxy_positions) if shown else None
         mesh_io.write_positions(self.obj.data, detail, checked=True)
         mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
-        if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it
+        if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it, if shown
             mesh_io.write_stretch(self.obj.data, stretch)
             stored.mark_written(self.obj, detail)
         self.show_preview(False)

@@ -113,8 +113,14 @@ def write_positions(mesh, positions, checked=False):
     _refresh(mesh)
 
 
-#: The POINT FLOAT attribute the detail's stretch against its rest is written to.
+#: The POINT FLOAT attribute the detail's stretch against its rest is written to while it is shown.
 STRETCH = "skin_detach_stretch"
+#: The color attribute "Show Stretch" paints the stretch into (blue 0, red at STRETCH_FULL or more).
+STRETCH_COLORS = "skin_detach_stretch_color"
+STRETCH_FULL = 0.25
+#: The mesh property that records, while the stretch is shown, what :func:`show_stretch` changed:
+#: the names of the artist's active color, render color and active attribute ("" for none).
+STRETCH_RECORD = "_skin_detach_stretch_shown"
 
 
 def write_point_floats(mesh, name, values):
@@ -132,38 +138,106 @@ def write_point_floats(mesh, name, values):
     attribute.data.foreach_set("value", buffer)
 
 
-#: The color attribute "Show Stretch" paints the stretch into (blue 0, red at STRETCH_FULL or more).
-STRETCH_COLORS = "skin_detach_stretch_color"
-STRETCH_FULL = 0.25
-
-
-def write_stretch_colors(mesh, stretch):
-    """Paint (n,) ``stretch`` into the POINT color attribute :data:`STRETCH_COLORS` (made when
-    missing) and make it the active color (what the viewport's Attribute coloring shows)."""
+def stretch_colors(stretch):
+    """(n, 4) float32 colours of (n,) ``stretch``: blue at 0, red at :data:`STRETCH_FULL` or more."""
     share = np.clip(np.asarray(stretch, dtype=np.float32) / STRETCH_FULL, 0.0, 1.0)
-    colors = np.stack([share, np.full_like(share, 0.15), 1.0 - share, np.ones_like(share)], axis=1)
-    attribute = mesh.color_attributes.get(STRETCH_COLORS)
-    if attribute is None or attribute.domain != 'POINT' or attribute.data_type != 'FLOAT_COLOR':
-        if attribute is not None:
-            mesh.color_attributes.remove(attribute)
-        attribute = mesh.color_attributes.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
-    attribute.data.foreach_set("color", colors.ravel())
-    mesh.color_attributes.active_color = attribute
+    return np.stack([share, np.full_like(share, 0.15), 1.0 - share, np.ones_like(share)], axis=1)
+
+
+def stretch_shown(mesh):
+    """``mesh`` shows its stretch: it has the :data:`STRETCH_COLORS` attribute (see :func:`show_stretch`)."""
+    return mesh.color_attributes.get(STRETCH_COLORS) is not None
+
+
+def show_stretch(mesh, stretch):
+    """Show (n,) ``stretch`` on ``mesh`` (Object Mode): the first time, record the artist's active
+    color, render color and active attribute in :data:`STRETCH_RECORD` and make the
+    :data:`STRETCH_COLORS` attribute the active color; then (every time) write ``stretch`` into
+    :data:`STRETCH` and its colours into :data:`STRETCH_COLORS` (see :func:`write_stretch`).
+    Checked before anything is added; :func:`hide_stretch` gives everything back."""
+    buffer = _checked_stretch(mesh, stretch)
+    if stretch_shown(mesh):
+        write_stretch(mesh, buffer)
+        return
+    colors = mesh.color_attributes
+    active = mesh.attributes.active
+    record = {"active_color": colors.active_color_name, "render_color": colors.default_color_name,
+              "active_attribute": active.name if active is not None else ""}
+    write_point_floats(mesh, STRETCH, buffer)
+    attribute = colors.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
+    attribute.data.foreach_set("color", stretch_colors(buffer).ravel())
+    colors.active_color = attribute
+    colors.default_color_name = record["render_color"]  # the render color stays the artist's
+    _set_active_attribute(mesh, record["active_attribute"])
+    mesh[STRETCH_RECORD] = record
 
 
 def write_stretch(mesh, stretch):
-    """Store (n,) ``stretch`` in the :data:`STRETCH` attribute and, while Show Stretch is on (the
-    :data:`STRETCH_COLORS` attribute exists), paint it too."""
-    write_point_floats(mesh, STRETCH, stretch)
-    if mesh.color_attributes.get(STRETCH_COLORS) is not None:
-        write_stretch_colors(mesh, stretch)
+    """After a step that stays: while ``mesh`` shows its stretch, write (n,) ``stretch`` into
+    :data:`STRETCH` and paint it into :data:`STRETCH_COLORS` (values only: which color is active
+    stays the artist's choice). While it is not shown (``stretch`` may be None) nothing is
+    written, and a :data:`STRETCH` attribute left by an earlier version (which wrote it on every
+    step) is removed: it would hold an old pose's figures."""
+    if not stretch_shown(mesh):
+        _remove_attribute(mesh, STRETCH)
+        return
+    buffer = _checked_stretch(mesh, stretch)
+    write_point_floats(mesh, STRETCH, buffer)
+    attribute = mesh.color_attributes[STRETCH_COLORS]
+    if attribute.domain != 'POINT' or attribute.data_type != 'FLOAT_COLOR':  # one the artist made: make ours
+        name = mesh.color_attributes.active_color_name
+        mesh.color_attributes.remove(attribute)
+        attribute = mesh.color_attributes.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
+        if name == STRETCH_COLORS:
+            mesh.color_attributes.active_color = attribute
+    attribute.data.foreach_set("color", stretch_colors(buffer).ravel())
 
 
-def remove_stretch_colors(mesh):
-    """Remove the :data:`STRETCH_COLORS` attribute, if there is one."""
+def hide_stretch(mesh):
+    """Remove what :func:`show_stretch` added (the :data:`STRETCH` and :data:`STRETCH_COLORS`
+    attributes, the record) and make the recorded active color, render color and active
+    attribute the artist's again (those that still exist). Also removes a :data:`STRETCH`
+    attribute an earlier version left. Does nothing to a mesh that has none of them."""
+    record = mesh.get(STRETCH_RECORD) if stretch_shown(mesh) else None  # (one an undo left behind: dropped)
+    record = {key: record.get(key, "") for key in ("active_color", "render_color", "active_attribute")} \
+        if hasattr(record, "get") else None
+    _remove_attribute(mesh, STRETCH)
     attribute = mesh.color_attributes.get(STRETCH_COLORS)
     if attribute is not None:
         mesh.color_attributes.remove(attribute)
+    if STRETCH_RECORD in mesh:
+        del mesh[STRETCH_RECORD]
+    if record is None:
+        return
+    colors = mesh.color_attributes
+    for field, name in (("active_color_name", record["active_color"]), ("default_color_name", record["render_color"])):
+        if isinstance(name, str) and (name == "" or colors.get(name) is not None):
+            setattr(colors, field, name)
+    _set_active_attribute(mesh, record["active_attribute"])
+
+
+def _checked_stretch(mesh, stretch):
+    buffer = np.ascontiguousarray(stretch, dtype=np.float32)
+    if buffer.shape != (len(mesh.vertices),):
+        raise SkinDetachError(f"stretch: expected {len(mesh.vertices)} values for mesh {mesh.name!r}, got "
+                              f"{buffer.shape}")
+    if not np.isfinite(buffer).all():
+        raise SkinDetachError(f"stretch: expected finite values for mesh {mesh.name!r}, got NaN or inf")
+    return buffer
+
+
+def _remove_attribute(mesh, name):
+    attribute = mesh.attributes.get(name)
+    if attribute is not None:
+        mesh.attributes.remove(attribute)
+
+
+def _set_active_attribute(mesh, name):
+    """Make the attribute ``name`` the active one ("": none), if it exists."""
+    if name == "":
+        mesh.attributes.active_index = -1
+    elif isinstance(name, str) and mesh.attributes.get(name) is not None:
+        mesh.attributes.active = mesh.attributes[name]
 
 
 def read_point_floats(mesh, name):
@@ -186,7 +260,8 @@ def _refresh(mesh):
 
 def snapshot(mesh):
     """Exact copy of what a step may change: the positions, every shape key (what
-    :func:`write_positions` writes) and the :data:`STRETCH` attribute (None: there was none)."""
+    :func:`write_positions` writes), the :data:`STRETCH` attribute (None: there was none) and
+    whether the stretch was shown (:func:`stretch_shown`: its colours follow from its values)."""
     keys = mesh.shape_keys
     blocks = {}
     if keys is not None:
@@ -196,16 +271,19 @@ def snapshot(mesh):
             blocks[block.name] = data
     positions = np.empty(3 * len(mesh.vertices), dtype=np.float32)
     mesh.attributes["position"].data.foreach_get("vector", positions)
-    return positions, blocks, read_point_floats(mesh, STRETCH)
+    return positions, blocks, read_point_floats(mesh, STRETCH), stretch_shown(mesh)
 
 
 def restore(mesh, saved):
-    """Write back a :func:`snapshot`, bit for bit."""
-    positions, blocks, stretch = saved
-    if stretch is not None:
-        write_point_floats(mesh, STRETCH, stretch)
-    elif mesh.attributes.get(STRETCH) is not None:
-        mesh.attributes.remove(mesh.attributes[STRETCH])
+    """Write back a :func:`snapshot`, bit for bit (a stretch shown or hidden since is hidden or
+    shown again)."""
+    positions, blocks, stretch, shown = saved
+    if shown and stretch is not None:
+        show_stretch(mesh, stretch)
+    else:
+        hide_stretch(mesh)
+        if stretch is not None:  # an earlier version's, not shown
+            write_point_floats(mesh, STRETCH, stretch)
     if mesh.shape_keys is not None:
         for block in mesh.shape_keys.key_blocks:
             if block.name in blocks:

@@ -1,5 +1,6 @@
 """The rig around a bound mesh: building the binding and its proxy object, handles from a
-selection, and clearing it all. The mesh's own data is only read here, never written.
+selection, the stretch map, and clearing it all. The mesh's positions are only read here, never
+written (only the stretch map's attributes, see :func:`show_stretch`).
 """
 
 import numpy as np
@@ -129,9 +130,10 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     proxy = _make_proxy(obj, surface)
     preview = None if surface.preview is None else _make_preview(obj, surface.preview)
     stored.store(obj, surface, positions, proxy, preview)
-    # The stretch at rest, 0: the attribute exists from now on, so the first confirm only writes
-    # values (adding an attribute to a mesh of millions makes Blender evaluate it anew: 0.3 s at 3M).
-    mesh_io.write_stretch(obj.data, np.zeros(positions.shape[0], dtype=np.float32))
+    # The pose bound is the new rest: a stretch shown is 0 everywhere now (an earlier version's
+    # attribute, not shown, goes: nothing is added to a mesh until its stretch is shown).
+    shown = mesh_io.stretch_shown(mesh)
+    mesh_io.write_stretch(mesh, np.zeros(positions.shape[0], dtype=np.float32) if shown else None)
     kept = removed = 0
     centers = {}
     for empty, detail, axis in old:
@@ -271,8 +273,31 @@ def selection(context):
     return obj, picked, active is not obj
 
 
+def current_stretch(obj):
+    """(n,) float32 the stretch of the bound mesh ``obj`` (Object Mode) against its rest in the
+    pose its proxy holds (the last step's: :class:`.core.stretch.SkinStretch`); needs no attribute."""
+    binding = stored.open_binding(obj)
+    return binding.stretch(mesh_io.read_positions(binding.proxy.data))
+
+
+def show_stretch(obj, show=True):
+    """Show the stretch of the bound mesh ``obj`` (Object Mode) in its attributes (see
+    :func:`.mesh_io.show_stretch`; again: painted anew), or with ``show=False`` remove them and give
+    the artist's active and render colors back (:func:`.mesh_io.hide_stretch`)."""
+    if show:
+        mesh_io.show_stretch(obj.data, current_stretch(obj))
+    else:
+        stored.check_editable(obj)
+        if obj.mode == 'EDIT' or obj.data.is_editmode:
+            raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
+        mesh_io.hide_stretch(obj.data)
+    obj.data.update()
+
+
 def clear(obj):
-    """Remove the proxy, every handle and the stored binding of ``obj``; the mesh keeps its shape."""
+    """Remove the proxy, every handle and the stored binding of ``obj``, and what Show Stretch
+    added to its mesh (the artist's active color back); the mesh keeps its shape."""
+    mesh_io.hide_stretch(obj.data)
     proxy = stored.proxy_of(obj)
     collections = set(proxy.users_collection) if proxy is not None else set()
     for empty in handles.handles_of(obj):

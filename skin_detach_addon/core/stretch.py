@@ -11,6 +11,11 @@ average); the stretch of detail vertex i is the mean of its faces' stretch under
 rest-area weights (a partition of unity: 0 at rest). One product of an (n, k) sparse matrix with
 seven or so entries a row, so it costs a small part of a rebuild (a per-edge measure of the
 detail itself gathers twice the detail per edge and cost a 300K rebuild's time again).
+
+Proxy points are measured as the proxy mesh stores them (rounded to float32): the stretch of a
+solve's float64 proxy and of the proxy mesh it was written to are the same bits, so the figures
+computed when the stretch is first shown (from the proxy mesh) and those a step writes agree,
+and both are exactly 0 at rest.
 """
 
 import numpy as np
@@ -29,7 +34,7 @@ class SkinStretch:
         rest = surface.proxy_vertices
         self.m = rest.shape[0]
         self._faces = np.asarray(faces, dtype=np.int64)
-        self._rest = self._lengths(rest)
+        self._rest = self._lengths(_as_stored(rest))
         self._inverse = np.divide(1.0, self._rest, out=np.zeros_like(self._rest), where=self._rest > 0)
         skin = surface.skin
         u = skin.case.shape[0]
@@ -38,7 +43,7 @@ class SkinStretch:
 
     def face_stretch(self, points):
         """(k,) the stretch of every proxy face at ``points`` (m, 3)."""
-        change = np.abs(self._lengths(as_points("points", points, self.m)) - self._rest) * self._inverse
+        change = np.abs(self._lengths(_as_stored(as_points("points", points, self.m))) - self._rest) * self._inverse
         return change.mean(axis=1)  # exactly 0 at rest: the same lengths, computed the same way
 
     def _lengths(self, points):
@@ -47,3 +52,8 @@ class SkinStretch:
 
     def __call__(self, points):
         return np.asarray(self._weights @ self.face_stretch(points).astype(np.float32), dtype=np.float32)
+
+
+def _as_stored(points):
+    """(m, 3) float64 ``points`` rounded to float32, as a Blender mesh stores them."""
+    return np.asarray(points, dtype=np.float32).astype(np.float64)

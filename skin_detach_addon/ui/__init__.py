@@ -5,7 +5,7 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 import bpy
 
 from .. import api
-from . import idle_preparation, live_update, menus, operators, panel, properties, saving
+from . import idle_preparation, live_update, menus, operators, panel, properties, saving, stretch_shading
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
 
@@ -17,11 +17,13 @@ def register():
     live_update.register()
     idle_preparation.register()
     saving.register()
+    stretch_shading.register()
     menus.register()
 
 
 def unregister():
     menus.unregister()
+    stretch_shading.unregister()
     saving.unregister()
     idle_preparation.unregister()
     live_update.unregister()

@@ -23,6 +23,7 @@ class VIEW3D_MT_skin_detach(bpy.types.Menu):
         layout.operator("skin_detach.add_anchor", icon='PINNED')
         layout.operator("skin_detach.drag", icon='VIEW_PAN')
         layout.operator("skin_detach.apply", icon='CHECKMARK')
+        layout.operator("skin_detach.show_stretch", icon='MOD_SMOOTH')
         layout.separator()
         layout.operator("skin_detach.reset", icon='LOOP_BACK')
         layout.operator("skin_detach.clear", icon='TRASH')

@@ -6,7 +6,7 @@ from mathutils import Euler
 
 from .. import api
 from ..api import SkinDetachError
-from . import live_update
+from . import live_update, stretch_shading
 from .region_view import RegionView
 
 #: Seconds between the TIMER events that settle a drag's solve while the mouse rests.
@@ -320,33 +320,37 @@ class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
         if context.active_object is not obj and obj.name in context.view_layer.objects:
             context.view_layer.objects.active = obj
         api.clear(obj)
+        stretch_shading.settle()
         self.report({'INFO'}, f"Skin Detach: cleared {obj.name}")
         return {'FINISHED'}
 
 
-class SKIN_DETACH_OT_show_stretch(_Operator, bpy.types.Operator):
+class SKIN_DETACH_OT_show_stretch(_BoundOperator, bpy.types.Operator):
     """Colour the mesh by how much it stretches against its rest (blue none, red 25 % or more),
-    updated by every confirm; Solid shading shows it with Attribute coloring. Again to remove"""
+    updated by every confirm; every Solid 3D View shows it (Attribute coloring). Again to give
+    back the mesh's own colors and the views' coloring"""
     bl_idname = "skin_detach.show_stretch"
     bl_label = "Show Stretch"
     bl_options = {'REGISTER', 'UNDO'}
 
-    @classmethod
-    def poll(cls, context):
-        return bound_owner(context) is not None
-
     def run(self, context):
         obj = bound_owner(context)
         show = not api.stretch_shown(obj)
-        api.show_stretch(obj, show)
-        for area in getattr(context.screen, "areas", ()):
-            for space in area.spaces:
-                if space.type == 'VIEW_3D':
-                    shading = space.shading
-                    if show and shading.type == 'SOLID':
-                        shading.color_type = 'ATTRIBUTE'
-                    elif not show and shading.color_type == 'ATTRIBUTE':
-                        shading.color_type = 'MATERIAL'
+        active = context.active_object
+        editing = active is not None and active.mode == 'EDIT'
+        if editing:  # Edit Mode keeps the mesh in its own copy: written back first, entered again after
+            bpy.ops.object.mode_set(mode='OBJECT')
+        try:
+            api.show_stretch(obj, show)
+        finally:
+            if editing:
+                bpy.ops.object.mode_set(mode='EDIT')
+        if show:
+            stretch_shading.show()
+        else:
+            stretch_shading.settle()
+        self.report({'INFO'}, f"Skin Detach: stretch of {obj.name} shown (blue none, red 25 % or more)" if show
+                    else f"Skin Detach: stretch of {obj.name} hidden, its own colors back")
         return {'FINISHED'}
 
 
