@@ -220,14 +220,20 @@ def live_pose(obj, frame):
     api.deform(obj)
 
 
-def test_baked_objects_carry_each_frames_own_stretch_whatever_pose_is_shown(scene):
-    """Item 7, OBJECTS: default (the stretch shown) and True: each frame's own; False: none."""
-    obj, _ = animated_rig()
+def own_stretch_shown(obj, frames=(1, 3)):
+    """Each frame's own stretch (api.stretch of its live pose), then the stretch shown."""
     own = {}
-    for frame in (1, 3):
+    for frame in frames:
         live_pose(obj, frame)
         own[frame] = api.stretch(obj)
     api.show_stretch(obj)
+    return own
+
+
+def test_baked_objects_carry_each_frames_own_stretch_whatever_pose_is_shown(scene):
+    """Item 7, OBJECTS: default (the stretch shown) and True: each frame's own; False: none."""
+    obj, _ = animated_rig()
+    own = own_stretch_shown(obj)
     baked = {}
     for shown_at in (3, 1):
         live_pose(obj, shown_at)
@@ -277,11 +283,7 @@ def ply_vertices(path):
 def test_ply_bakes_carry_each_frames_own_stretch_or_none_and_no_byte_depends_on_the_live_pose(scene, tmp_path):
     """Item 7, FILES (.ply)."""
     obj, _ = animated_rig(uvs=False)                              # no UV seams: one PLY vertex per vertex
-    own = {}
-    for frame in (1, 3):
-        live_pose(obj, frame)
-        own[frame] = api.stretch(obj)
-    api.show_stretch(obj)
+    own = own_stretch_shown(obj)
     files = {}
     for shown_at in (3, 1):
         live_pose(obj, shown_at)
