@@ -23,6 +23,7 @@ import json
 import os
 import pathlib
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -41,6 +42,20 @@ TEST_TIMEOUT_S = 240
 
 class GuiSetupFailed(Exception):
     pass
+
+
+def run_session(command, timeout=None, env=None):
+    """``subprocess.run(command)`` in a session of its own: on a timeout the whole session (Blender
+    and the X server xvfb-run started for it) is killed, and nothing else on the machine."""
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                          start_new_session=True) as process:
+        try:
+            stdout, stderr = process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired as exc:
+            os.killpg(process.pid, signal.SIGKILL)
+            exc.stdout, exc.stderr = process.communicate()
+            raise
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 
 def run(command, **kwargs):
@@ -110,8 +125,7 @@ class Chroot:
 
     def shell(self, script, root=None, env=None, timeout=None):
         exports = "".join(f"export {k}={v}; " for k, v in (env or {}).items())
-        return subprocess.run(["chroot", str(root or self.root), "bash", "-c", exports + script],
-                              capture_output=True, text=True, timeout=timeout)
+        return run_session(["chroot", str(root or self.root), "bash", "-c", exports + script], timeout=timeout)
 
     def path(self, host_path):
         """Where a file of the project is seen inside."""
@@ -136,8 +150,7 @@ class Host:
         pass
 
     def shell(self, script, env=None, timeout=None):
-        return subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=timeout,
-                              env=dict(os.environ, **(env or {})))
+        return run_session(["bash", "-c", script], timeout=timeout, env=dict(os.environ, **(env or {})))
 
     def path(self, host_path):
         return str(pathlib.Path(host_path).resolve())
@@ -210,8 +223,7 @@ def main():
                 done = where.shell(command, env=env, timeout=TEST_TIMEOUT_S)
                 log = done.stdout + done.stderr
             except subprocess.TimeoutExpired as exc:
-                log = f"timed out after {TEST_TIMEOUT_S} s\n{exc.stdout or ''}{exc.stderr or ''}"
-                where.shell("pkill -f -- '--enable-event-simulate' || true")
+                log = f"timed out after {TEST_TIMEOUT_S} s (killed)\n{exc.stdout or ''}{exc.stderr or ''}"
             (out / f"{module}.{name}.log").write_text(log if isinstance(log, str) else log.decode(errors="replace"))
             outcome = json.loads(result.read_text()) if result.exists() else {"passed": False, "message":
                                                                                "no result (Blender crashed or hung): "
