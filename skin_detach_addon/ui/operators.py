@@ -60,10 +60,11 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
     target_faces: bpy.props.IntProperty(
         name="Proxy Faces", description="Number of faces of the proxy the detail mesh is bound to "
-        "(default: the panel's value)", default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000)
+        "(default: the panel's value)", default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000,
+        options={'SKIP_SAVE'})
     normal_test: bpy.props.BoolProperty(
         name="Normal Test", default=True, description="Refuse proxy edge collapses that would turn proxy faces "
-        "away from the detail they carry (default: the panel's value)")
+        "away from the detail they carry (default: the panel's value)", options={'SKIP_SAVE'})
 
     @classmethod
     def poll(cls, context):
@@ -108,9 +109,11 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 class _AddOperator(_BoundOperator):
     kind = api.HANDLE
     bl_options = {'REGISTER', 'UNDO'}
-    group: bpy.props.StringProperty(name="Vertex Group", default="",
+    # SKIP_SAVE: a value is for the press it was given to (the Group field's +, the Redo panel),
+    # never remembered into the next plain press.
+    group: bpy.props.StringProperty(name="Vertex Group", default="", options={'SKIP_SAVE'},
                                     description="Make it from this vertex group instead of the selection")
-    mirror: bpy.props.EnumProperty(name="Mirror", default='NONE',
+    mirror: bpy.props.EnumProperty(name="Mirror", default='NONE', options={'SKIP_SAVE'},
                                    items=(('NONE', "Off", ""), ('X', "X", ""), ('Y', "Y", ""), ('Z', "Z", "")),
                                    description="Also make the mirrored twin (default: the panel's setting)")
 
@@ -167,7 +170,7 @@ class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
     bl_idname = "skin_detach.remove_handle"
     bl_label = "Remove Handle"
     bl_options = {'REGISTER', 'UNDO'}
-    name: bpy.props.StringProperty(name="Handle", default="")
+    name: bpy.props.StringProperty(name="Handle", default="", options={'SKIP_SAVE'})
 
     def run(self, context):
         empty = _named_handle(context, self.name)
@@ -182,7 +185,7 @@ class SKIN_DETACH_OT_select_handle(_Operator, bpy.types.Operator):
     bl_idname = "skin_detach.select_handle"
     bl_label = "Select Handle"
     bl_options = {'REGISTER', 'UNDO'}
-    name: bpy.props.StringProperty(name="Handle", default="")
+    name: bpy.props.StringProperty(name="Handle", default="", options={'SKIP_SAVE'})
 
     def run(self, context):
         empty = _named_handle(context, self.name)
@@ -210,11 +213,12 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
     # What the drag did, shown in the Redo panel (and the scripted use): scale along the world
     # axes and rotation about the handle's position, then the move; see api.moved_matrix.
-    offset: bpy.props.FloatVectorProperty(name="Move", subtype='TRANSLATION', size=3,
+    offset: bpy.props.FloatVectorProperty(name="Move", subtype='TRANSLATION', size=3, options={'SKIP_SAVE'},
                                           description="World-space move of the handle")
-    rotation: bpy.props.FloatVectorProperty(name="Rotation", subtype='EULER', size=3,
+    rotation: bpy.props.FloatVectorProperty(name="Rotation", subtype='EULER', size=3, options={'SKIP_SAVE'},
                                             description="Turn of the handle about its own position (world axes)")
     scale: bpy.props.FloatVectorProperty(name="Scale", subtype='XYZ', size=3, default=(1.0, 1.0, 1.0),
+                                         options={'SKIP_SAVE'},
                                          description="Scale of the handle along the world axes about its position")
 
     @classmethod

@@ -1,0 +1,46 @@
+"""Headless bpy: the panel's operators as the window drives them (issue 43, items 14, 15, 17)."""
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_support import activate, band, import_spot, rig, select_vertices  # noqa: E402
+
+from skin_detach_addon import api  # noqa: E402
+from skin_detach_addon.blender import mesh_io  # noqa: E402
+
+
+def _operators():
+    from skin_detach_addon import ui
+    return [cls for cls in ui.CLASSES if issubclass(cls, bpy.types.Operator)]
+
+
+def test_no_operator_remembers_a_value_into_the_next_press(scene):
+    """The Group field's + sets ``group`` for its press; Blender remembers a press's properties
+    into the next one of the same operator (the panel's plain Add Handle then built from the
+    group) unless they are SKIP_SAVE. The panel's values are the defaults of every other."""
+    remembered = [f"{cls.bl_idname}.{prop.identifier}" for cls in _operators()
+                  for prop in getattr(bpy.ops, cls.bl_idname.split(".")[0]).__getattr__(
+                      cls.bl_idname.split(".")[1]).get_rna_type().properties
+                  if prop.identifier != "rna_type" and not prop.is_skip_save]
+    assert not remembered, f"remembered into the next press: {remembered}"
+
+
+def test_the_group_field_is_for_its_own_press_only(scene):
+    obj = import_spot()
+    rig(obj, axis=1)
+    top = np.flatnonzero(band(obj, 0.85, 1.0, axis=1))
+    group = obj.vertex_groups.new(name="head")
+    group.add(top.tolist(), 1.0, 'REPLACE')
+    assert bpy.ops.skin_detach.add_handle(group="head", mirror='X') == {'FINISHED'}   # the Group field's +
+    side = band(obj, 0.4, 0.5, axis=1)
+    activate(obj)
+    select_vertices(obj, side)
+    before = set(api.handles_of(obj))
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}                    # the plain button
+    made = set(api.handles_of(obj)) - before
+    assert len(made) == 1, f"the plain Add Handle made {len(made)} handles (the last press's mirror?)"
+    empty = made.pop()
+    assert api.handle_group(empty) == "", f"the plain Add Handle used the group {api.handle_group(empty)!r}"
+    assert np.array_equal(np.sort(empty["_skin_detach_handle"]["detail_ids"]), np.flatnonzero(side))
