@@ -44,3 +44,45 @@ def test_the_group_field_is_for_its_own_press_only(scene):
     empty = made.pop()
     assert api.handle_group(empty) == "", f"the plain Add Handle used the group {api.handle_group(empty)!r}"
     assert np.array_equal(np.sort(empty["_skin_detach_handle"]["detail_ids"]), np.flatnonzero(side))
+
+
+def test_removing_a_handle_puts_the_mesh_where_the_rig_left_says(scene):
+    obj = import_spot()
+    top = rig(obj, axis=1)
+    rest = mesh_io.read_positions(obj.data).copy()
+    activate(obj)
+    select_vertices(obj, band(obj, 0.45, 0.55, axis=1))
+    assert bpy.ops.skin_detach.add_handle() == {'FINISHED'}
+    middle = bpy.context.view_layer.objects.active
+    top.location.z += 0.3
+    api.deform(obj)
+    posed = mesh_io.read_positions(obj.data).copy()
+    assert np.abs(posed - rest).max() > 0.1
+    # The moved handle removed (the panel's X): the rest shape, bit-exact (the others are at rest).
+    assert bpy.ops.skin_detach.remove_handle(name=top.name) == {'FINISHED'}
+    assert np.array_equal(mesh_io.read_positions(obj.data), rest), "the removed handle's pose stayed on the mesh"
+    # A pose of the handle left stays when an unmoved one goes; the anchor removed: solved without it.
+    middle.location.x += 0.2
+    api.deform(obj)
+    expected = mesh_io.read_positions(obj.data).copy()
+    anchor = [e for e in api.handles_of(obj) if api.handle_kind(e) == api.ANCHOR][0]
+    assert bpy.ops.skin_detach.remove_handle(name=anchor.name) == {'FINISHED'}
+    without_anchor = mesh_io.read_positions(obj.data).copy()
+    api.deform(obj)                                           # what Apply gives for the rig left
+    assert np.abs(mesh_io.read_positions(obj.data) - without_anchor).max() <= 1e-6
+    assert np.abs(without_anchor - expected).max() > 1e-4    # the anchor held the bottom before
+    # The last one removed: the rest shape.
+    activate(middle)
+    assert bpy.ops.skin_detach.remove_handle() == {'FINISHED'}
+    assert api.handles_of(obj) == [] and np.array_equal(mesh_io.read_positions(obj.data), rest)
+
+
+def test_removing_a_handle_of_a_sculpted_mesh_keeps_the_sculpt(scene):
+    obj = import_spot()
+    top = rig(obj, axis=1)
+    sculpted = mesh_io.read_positions(obj.data).copy()
+    sculpted[:10] += 0.05
+    obj.data.vertices.foreach_set("co", sculpted.ravel())
+    obj.data.update()
+    assert bpy.ops.skin_detach.remove_handle(name=top.name) == {'FINISHED'}
+    assert np.array_equal(mesh_io.read_positions(obj.data), sculpted)

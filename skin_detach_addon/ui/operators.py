@@ -166,7 +166,8 @@ def _named_handle(context, name):
 
 
 class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
-    """Remove a handle or anchor (the active one, or the one named)"""
+    """Remove a handle or anchor (the active one, or the one named); the mesh takes the shape of
+    the handles left at once"""
     bl_idname = "skin_detach.remove_handle"
     bl_label = "Remove Handle"
     bl_options = {'REGISTER', 'UNDO'}
@@ -174,9 +175,18 @@ class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
 
     def run(self, context):
         empty = _named_handle(context, self.name)
-        name = empty.name
-        api.remove_handle(empty)
-        self.report({'INFO'}, f"Skin Detach: removed {name}")
+        name, obj = empty.name, api.mesh_of(empty)
+        if empty == context.active_object and obj is not None and obj.name in context.view_layer.objects:
+            context.view_layer.objects.active = obj  # the panel goes on listing the rig's handles
+        try:
+            api.remove_handle(empty)
+        except SkinDetachError as exc:
+            if name in bpy.data.objects:
+                raise  # nothing was removed
+            self.report({'WARNING'}, f"Skin Detach: {exc}")  # removed: the step stays (and is undone as one)
+            return {'FINISHED'}
+        live_update.remember(obj)  # the mesh is solved for the handles left
+        self.report({'INFO'}, f"Skin Detach: removed {name}; the mesh follows the handles left")
         return {'FINISHED'}
 
 

@@ -47,3 +47,40 @@ def test_the_group_fields_plus_does_not_stick_to_add_handle(ui):
     assert sd.handle_group(empty) == "", f"the plain Add Handle used the group {sd.handle_group(empty)!r}"
     assert np.array_equal(np.sort(empty["_skin_detach_handle"]["detail_ids"]), side), \
         "the plain Add Handle did not take the selection"
+
+
+def test_the_lists_x_puts_the_mesh_where_the_handles_left_say(ui):
+    yield from ui.setup()
+    obj, handle = rigs.rig(ui)
+    sd = rigs.api()
+    rest = sd.rest_positions(obj).copy()
+    side = sd.add_handle(obj, np.flatnonzero(rest[:, 0] > 0.8), mirror="")
+    rigs.activate(ui, handle)
+    rigs.undo_push(ui, "Side")
+    names = obj.name, handle.name, side.name
+    yield from rigs.drag(ui, 60, 30)
+    posed = rigs.positions(obj).copy()
+    assert np.abs(posed - rest).max() > 0.1, "the drag did not pose the mesh"
+    yield from ui.find_button(f'bpy.ops.skin_detach.remove_handle(name="{handle.name}")', columns=(0.8, 0.82))
+    assert ui.found, f"no X beside {handle.name} in the panel's list"
+    yield from ui.click(*ui.found, wait=1.5)
+    assert names[1] not in bpy.data.objects, "the X did not remove the handle"
+    now = rigs.positions(obj)
+    assert np.array_equal(now, rest), \
+        f"the removed handle's pose stayed on the mesh ({np.abs(now - rest).max():.4f} from the rest shape)"
+    # The side handle dragged a little: nothing jumps back (the mesh already is where the rig says).
+    yield from ui.click_button(f'bpy.ops.skin_detach.select_handle(name="{side.name}")')
+    start = side.matrix_world.translation.copy()
+    yield from rigs.drag(ui, 4, 0, steps=1)
+    step = (bpy.data.objects[names[2]].matrix_world.translation - start).length
+    moved = rigs.positions(bpy.data.objects[names[0]])
+    cap = np.flatnonzero(rest[:, 2] > 0.6)  # where the removed handle was
+    jump = np.abs(moved[cap] - rest[cap]).max()
+    assert 0 < step and jump < 2 * step, f"a 4-pixel drag ({step:.4f}) of the side handle moved the cap by {jump:.4f}"
+    # Ctrl+Z three times: the drag, the pick in the list, the removal (one step each): the
+    # handle and its pose are back.
+    yield from ui.hover_view()
+    for _ in range(3):
+        yield from ui.press('Z', ctrl=True, wait=1.0)
+    assert names[1] in bpy.data.objects, "Ctrl+Z did not bring the removed handle back"
+    assert np.array_equal(rigs.positions(bpy.data.objects[names[0]]), posed), "Ctrl+Z did not bring the pose back"
