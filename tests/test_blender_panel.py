@@ -86,3 +86,15 @@ def test_removing_a_handle_of_a_sculpted_mesh_keeps_the_sculpt(scene):
     obj.data.update()
     assert bpy.ops.skin_detach.remove_handle(name=top.name) == {'FINISHED'}
     assert np.array_equal(mesh_io.read_positions(obj.data), sculpted)
+
+
+def test_the_lists_x_in_edit_mode_leaves_it_and_solves(scene):
+    obj = import_spot()
+    top = rig(obj, axis=1)
+    rest = mesh_io.read_positions(obj.data).copy()
+    top.location.z += 0.3
+    api.deform(obj)
+    activate(obj)
+    bpy.ops.object.mode_set(mode='EDIT')
+    assert bpy.ops.skin_detach.remove_handle(name=top.name) == {'FINISHED'}
+    assert obj.mode == 'OBJECT' and np.array_equal(mesh_io.read_positions(obj.data), rest)

@@ -176,6 +176,8 @@ class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
     def run(self, context):
         empty = _named_handle(context, self.name)
         name, obj = empty.name, api.mesh_of(empty)
+        if obj is not None and obj.mode == 'EDIT' and context.active_object == obj:
+            bpy.ops.object.mode_set(mode='OBJECT')  # as Add Handle: the mesh is then solved without it
         if empty == context.active_object and obj is not None and obj.name in context.view_layer.objects:
             context.view_layer.objects.active = obj  # the panel goes on listing the rig's handles
         try:
