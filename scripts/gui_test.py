@@ -14,6 +14,8 @@ each GUI test (``tests/gui/test_*.py``, one generator per test) in its own Blend
 1600x900 window under Xvfb with ``--enable-event-simulate``. Every step after a test's set-up is
 an event (keys, mouse, panel buttons, F3, menus). A failing test leaves a screenshot of the window
 in ``out/gui/``. Prints one line per test and ``N passed, N failed``; exits 1 on any failure.
+A run of every test also fails when an operator of the add-on was never driven by an event in
+any of them (the coverage line; the runner reads what the Info editor logged as run).
 ``--pictures DIR`` runs the picture takers (``tests/gui/pictures.py``) instead and writes the
 docs' pictures of the real window into DIR.
 """
@@ -212,6 +214,7 @@ def main():
             return 1
         todo = [("pictures", "take_pictures")] if args.pictures else tests(args.k)
         passed = failed = 0
+        operators, driven = set(), set()
         for module, name in todo:
             result = out / f"{module}.{name}.json"
             extra = f" --pictures {where.path(pathlib.Path(args.pictures))}" if args.pictures else ""
@@ -229,6 +232,8 @@ def main():
                                                                                "no result (Blender crashed or hung): "
                                                                                + log.strip()[-800:]}
             seconds = time.monotonic() - begun
+            operators.update(outcome.get("operators", ()))
+            driven.update(outcome.get("driven", ()))
             if outcome["passed"]:
                 passed += 1
                 print(f"PASSED {module}::{name} ({seconds:.0f} s)", flush=True)
@@ -237,6 +242,16 @@ def main():
                 print(f"FAILED {module}::{name} ({seconds:.0f} s): {outcome['message']}", flush=True)
                 if outcome.get("screenshot"):
                     print(f"       screenshot: {result.with_suffix('.png')}", flush=True)
+        if operators and not args.pictures:
+            never = sorted(operators - driven)
+            if not never:
+                print(f"PASSED coverage: all {len(operators)} operators of the add-on driven by events", flush=True)
+            elif args.k:  # a partial run: says what it drove, fails nothing
+                print(f"coverage of this run: {len(operators) - len(never)} of {len(operators)} operators driven by "
+                      f"events; not: {', '.join(never)}", flush=True)
+            else:
+                failed += 1
+                print(f"FAILED coverage: never driven by an event in any GUI test: {', '.join(never)}", flush=True)
         print(f"gui: {time.monotonic() - started:.0f} s in all")
         print(f"{passed} passed, {failed} failed")
         return 1 if failed or not todo else 0

@@ -195,21 +195,34 @@ def test_drag_confirm_writes_what_the_last_move_showed_and_apply_forgets_the_pat
 
 
 def test_the_object_menus_list_every_operator(scene):
+    """F3 searches menus: every operator of the add-on is in the Skin Detach menu (or its
+    submenus), which the Object menu and, in Edit Mode, the Mesh menu hold."""
+    from skin_detach_addon import api, ui
     from skin_detach_addon.ui import menus
+    obj = import_spot()
+    rig(obj, axis=1)
+    activate(obj)
     drawn = []
 
     class Layout:
         def operator(self, idname, **_):
             drawn.append(idname)
+            return type("Properties", (), {})()
+
+        def menu(self, idname, **_):
+            getattr(bpy.types, idname).draw(type("Menu", (), {"layout": self})(), bpy.context)
 
         def separator(self):
             pass
 
+        def label(self, **_):
+            pass
+
     menus.VIEW3D_MT_skin_detach.draw(type("Menu", (), {"layout": Layout()})(), bpy.context)
-    for idname in ("skin_detach.build", "skin_detach.add_handle", "skin_detach.add_anchor", "skin_detach.drag",
-                   "skin_detach.apply", "skin_detach.reset", "skin_detach.clear"):
-        assert idname in drawn
-    for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu"):
+    operators = {cls.bl_idname for cls in ui.CLASSES if issubclass(cls, bpy.types.Operator)}
+    assert operators - set(drawn) == set(), f"not in the menus (F3 cannot find them): {operators - set(drawn)}"
+    assert drawn.count("skin_detach.select_handle") == len(api.handles_of(obj))
+    for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu", "VIEW3D_MT_edit_mesh"):
         assert menus._menu_entry in getattr(bpy.types, name)._dyn_ui_initialize()
 
 

@@ -98,3 +98,33 @@ def test_the_lists_x_in_edit_mode_leaves_it_and_solves(scene):
     bpy.ops.object.mode_set(mode='EDIT')
     assert bpy.ops.skin_detach.remove_handle(name=top.name) == {'FINISHED'}
     assert obj.mode == 'OBJECT' and np.array_equal(mesh_io.read_positions(obj.data), rest)
+
+
+def test_the_rig_collection_is_not_named_after_the_add_on_and_old_files_keep_theirs(scene):
+    """F3 "skin detach" listed "Add > Collection Instance > Skin Detach" (the rig's collection) first."""
+    from skin_detach_addon.blender import skin_rig
+    obj = import_spot()
+    rig(obj, axis=1)
+    proxy = api.proxy_of(obj)
+    [collection] = proxy.users_collection
+    assert not collection.name.lower().startswith("skin detach") and collection.name == skin_rig.RIG_COLLECTION
+    # A file of an earlier version: its collection was "Skin Detach", tagged so; the next change renames it.
+    collection.name = "Skin Detach"
+    collection[skin_rig.COLLECTION_TAG] = "Skin Detach"
+    activate(obj)
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    assert [c.name for c in api.proxy_of(obj).users_collection] == [skin_rig.RIG_COLLECTION]
+    assert "Skin Detach" not in bpy.data.collections and len(scene.collection.children) == 1 + \
+        sum(1 for c in scene.collection.children if c.get(skin_rig.COLLECTION_TAG) is None)
+
+
+@pytest.mark.parametrize("command", ["apply", "reset", "select_handle", "clear"])
+def test_commands_found_in_edit_mode_leave_it_and_run(scene, command):
+    obj = import_spot()
+    top = rig(obj, axis=1)
+    top.location.z += 0.3
+    activate(obj)
+    bpy.ops.object.mode_set(mode='EDIT')
+    options = {"name": top.name} if command == "select_handle" else {}
+    assert getattr(bpy.ops.skin_detach, command)(**options) == {'FINISHED'}
+    assert obj.mode == 'OBJECT'

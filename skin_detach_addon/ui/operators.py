@@ -27,8 +27,17 @@ def solve_report(stats):
     return {'INFO'}, f"Skin Detach: {text}"
 
 
+def leave_edit_mode(context):
+    """Object Mode when the active object is in Edit Mode (as Build and Add Handle leave it): a
+    command found there (its menu, F3) then runs instead of refusing, since Skin Detach never
+    writes a mesh under Edit Mode."""
+    if context.active_object is not None and context.active_object.mode == 'EDIT':
+        bpy.ops.object.mode_set(mode='OBJECT')
+
+
 def deform_and_report(operator, context):
     """Solve the bound mesh behind the active object from its handles, tell live update, report."""
+    leave_edit_mode(context)
     obj = bound_owner(context)
     stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
     live_update.remember(obj)
@@ -73,8 +82,7 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
     def run(self, context):
         obj = api.mesh_of(context.active_object)
-        if obj.mode == 'EDIT':
-            bpy.ops.object.mode_set(mode='OBJECT')
+        leave_edit_mode(context)
         settings = context.scene.skin_detach
         for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
             if not self.properties.is_property_set(name):
@@ -176,8 +184,7 @@ class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
     def run(self, context):
         empty = _named_handle(context, self.name)
         name, obj = empty.name, api.mesh_of(empty)
-        if obj is not None and obj.mode == 'EDIT' and context.active_object == obj:
-            bpy.ops.object.mode_set(mode='OBJECT')  # as Add Handle: the mesh is then solved without it
+        leave_edit_mode(context)  # the mesh is then solved without it
         if empty == context.active_object and obj is not None and obj.name in context.view_layer.objects:
             context.view_layer.objects.active = obj  # the panel goes on listing the rig's handles
         try:
@@ -201,6 +208,7 @@ class SKIN_DETACH_OT_select_handle(_Operator, bpy.types.Operator):
 
     def run(self, context):
         empty = _named_handle(context, self.name)
+        leave_edit_mode(context)
         for obj in context.selected_objects:
             obj.select_set(False)
         empty.select_set(True)
@@ -309,6 +317,7 @@ class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
+        leave_edit_mode(context)
         obj = bound_owner(context)
         api.reset(obj)
         live_update.remember(obj)
@@ -328,6 +337,7 @@ class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
         return bound_owner(context) is not None or api.orphan_owner(context.active_object) is not None
 
     def run(self, context):
+        leave_edit_mode(context)
         obj = bound_owner(context)
         if obj is None:
             name = api.clear_orphan(context.active_object)
