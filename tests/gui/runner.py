@@ -87,7 +87,8 @@ def count_scripted_calls():
 def logged_operators():
     """(the bl_idnames of the add-on's operators, those of them driven by events in this test).
     Blender logs an operator run in the window (a key, a button, a menu, F3; modal ones when they
-    finish) as its Python line in the Info editor, and a script's ``bpy.ops`` call too: an
+    finish; one that raised as well, not one that reported an error and cancelled) as its Python
+    line in the Info editor, and a script's ``bpy.ops`` call too: an
     operator counts as driven when it was logged more often than a script called it. Read by
     script at the end: the test's events are over."""
     try:
