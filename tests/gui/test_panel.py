@@ -84,3 +84,56 @@ def test_the_lists_x_puts_the_mesh_where_the_handles_left_say(ui):
         yield from ui.press('Z', ctrl=True, wait=1.0)
     assert names[1] in bpy.data.objects, "Ctrl+Z did not bring the removed handle back"
     assert np.array_equal(rigs.positions(bpy.data.objects[names[0]]), posed), "Ctrl+Z did not bring the pose back"
+
+
+def test_every_other_button_of_the_panel(ui):
+    """Rebuild, Add Anchor, Drag Handle (the button: the drag goes on in the view), Apply Handles,
+    Live Update, Select Proxy and Clear Skin, pressed in the panel (the list's buttons, Add
+    Handle, the Group field's +, Reset and Show Stretch have tests of their own)."""
+    yield from ui.setup()
+    obj, handle = rigs.rig(ui, anchor=False)
+    sd = rigs.api()
+    rest = sd.rest_positions(obj).copy()
+    rigs.select_vertices(obj, np.flatnonzero(rest[:, 2] < -0.6))
+    rigs.activate(ui, obj)
+    rigs.undo_push(ui, "Selection")
+    yield from ui.click_button("bpy.ops.skin_detach.build()", wait=2.0)
+    assert sd.is_bound(obj) and len(sd.handles_of(obj)) == 1, "Rebuild lost the handle"
+    yield from ui.click_button("bpy.ops.skin_detach.add_anchor()", wait=1.5)
+    anchors = [e for e in sd.handles_of(obj) if sd.handle_kind(e) == sd.ANCHOR]
+    assert len(anchors) == 1, f"Add Anchor made {len(anchors)} anchors"
+    yield from ui.click_button(f'bpy.ops.skin_detach.select_handle(name="{handle.name}")')
+    start = handle.matrix_world.copy()
+    # Drag Handle pressed in the sidebar, R at once, the mouse a quarter turn about the handle
+    # (as the view shows it), Enter.
+    yield from ui.click_button("bpy.ops.skin_detach.drag()", wait=0.5)
+    yield from ui.press('R', wait=0.3)
+    centre = np.array(ui.on_screen(start.translation), dtype=float)
+    arm = np.array(ui.mouse, dtype=float) - centre
+    x, y = centre + 0.3 * np.array((-arm[1], arm[0]))
+    yield from ui.move(x, y, steps=4, wait=0.2)
+    yield 0.5
+    yield from ui.press('RET', wait=1.0)
+    turn = np.array(handle.matrix_world.to_3x3()) @ np.linalg.inv(np.array(start.to_3x3()))
+    angle = np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1)))
+    assert abs(angle - 90) < 3, f"a quarter turn of the mouse about the handle turned it {angle:.1f} degrees " \
+                                f"(the drag started from the panel's button)"
+    posed = rigs.positions(obj).copy()
+    assert np.abs(posed - rest).max() > 0.1, "the drag did not pose the mesh"
+    handle.location.z += 0.2  # as a keyframe or a driver would move it
+    yield from ui.click_button("bpy.ops.skin_detach.apply()", wait=1.5)
+    assert np.abs(rigs.positions(obj) - posed).max() > 0.05, "Apply Handles did not follow the handle"
+    yield from ui.click_button("skin_detach.live_update", wait=0.5)
+    assert bpy.context.scene.skin_detach.live_update, "the Live Update toggle did not turn it on"
+    applied = rigs.positions(obj).copy()
+    handle.location.z -= 0.2
+    yield 1.5
+    assert np.abs(rigs.positions(obj) - applied).max() > 0.05, "Live Update did not follow the handle"
+    yield from ui.click_button("skin_detach.live_update", wait=0.5)
+    assert not bpy.context.scene.skin_detach.live_update
+    proxy = sd.proxy_of(obj)
+    yield from ui.click_button("hide_select", wait=0.5)
+    assert not proxy.hide_select, "Select Proxy did not make the proxy selectable"
+    names = {e.name for e in sd.handles_of(obj)} | {proxy.name}
+    yield from ui.click_button("bpy.ops.skin_detach.clear()", wait=1.5)
+    assert not sd.is_bound(obj) and not names & set(bpy.data.objects.keys()), "Clear Skin left the rig"
