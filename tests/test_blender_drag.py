@@ -87,6 +87,8 @@ def test_a_mode_switch_keeps_what_the_typed_number_did_and_clears_it(scene):
     assert np.allclose(np.array(handle.matrix_world)[:3, 3], np.array(start)[:3, 3], atol=1e-5)
     session.event("MOUSEMOVE", "NOTHING", (60, 50))       # the mouse moves it from where it is now
     assert np.allclose(np.array(handle.matrix_world)[:3, 3] - np.array(start)[:3, 3], (0.1, 0.0, 0.0), atol=1e-5)
+    session.event("X", "PRESS", (60, 50))                  # an axis for the move: the turn stays about the view axis
+    assert np.allclose(_turn_of(start, handle.matrix_world), turned, atol=1e-5)
     session.event("TWO", "PRESS", (60, 50))                # 2 along X, on top of the mouse's 0.1
     session.event("S", "PRESS", (60, 50))                  # S: the move is kept, the scale starts at 1
     assert session.typed == ""

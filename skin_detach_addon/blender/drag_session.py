@@ -110,6 +110,9 @@ class DragSession:
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
         self.translation, self.angle = Vector((0.0, 0.0, 0.0)), 0.0
+        #: (3, 3) the turns of the rotate modes left before (``angle`` is the current one's, about
+        #: the current axis: an axis key in another mode does not turn them about another axis).
+        self.turned = Matrix.Identity(3)
         self.stretch = Matrix.Identity(3)
         #: What the drag did to the handle, as :func:`moved_matrix` takes it: translation (3,),
         #: rotation (3, 3), scale (3,) along the world axes (a stretch is always along them).
@@ -183,6 +186,7 @@ class DragSession:
                 self._reference = Vector(mouse)
             else:
                 self._settle(Vector(mouse))
+            self.turned, self.angle = self._turn(self.angle) @ self.turned, 0.0
             self.mode = "MOVE" if self.mode == _MODES[kind] else _MODES[kind]
             self._follow(Vector(mouse))
         elif kind in _AXES:  # a typed number stays, now along the new axis
@@ -259,7 +263,7 @@ class DragSession:
         return Matrix.Rotation(angle, 3, _AXES[self.axis] if self.axis else -Vector(self.view.direction))
 
     def _motion(self, translation, angle, stretch):
-        return translation.copy(), self._turn(angle), Vector([stretch[i][i] for i in range(3)])
+        return translation.copy(), self._turn(angle) @ self.turned, Vector([stretch[i][i] for i in range(3)])
 
     def _follow(self, mouse):
         self._place(*self._offsets(mouse))
