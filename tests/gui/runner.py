@@ -75,7 +75,12 @@ class _CountedOperator:
 def count_scripted_calls():
     """Make every script's ``bpy.ops.skin_detach.*`` call counted (see :data:`SCRIPTED`)."""
     import bpy.ops
-    original = bpy.ops._bpy_ops_submodule__getattr__
+    original = getattr(bpy.ops, "_bpy_ops_submodule__getattr__", None)
+    if original is None:  # another Blender's bpy.ops: nothing counts as driven (the coverage fails, saying so)
+        print("runner: bpy.ops._bpy_ops_submodule__getattr__ not found: script calls cannot be told from "
+              "events, no operator counts as driven", file=sys.stderr)
+        SCRIPTED["*"] = 1
+        return
 
     def counted(module, name):
         function = original(module, name)
@@ -106,6 +111,8 @@ def logged_operators():
     with bpy.context.temp_override(window=window, area=areas[0], region=region):
         bpy.ops.info.select_all(action='SELECT')
         bpy.ops.info.report_copy()
+    if SCRIPTED["*"]:
+        return known, []
     lines = wm.clipboard.splitlines()
     logged = collections.Counter(idname for line in lines for idname in known if line.startswith(f"bpy.ops.{idname}("))
     return known, sorted(idname for idname in known if logged[idname] > SCRIPTED[idname])
