@@ -14,6 +14,8 @@ each GUI test (``tests/gui/test_*.py``, one generator per test) in its own Blend
 1600x900 window under Xvfb with ``--enable-event-simulate``. Every step after a test's set-up is
 an event (keys, mouse, panel buttons, F3, menus). A failing test leaves a screenshot of the window
 in ``out/gui/``. Prints one line per test and ``N passed, N failed``; exits 1 on any failure.
+A run of every test also fails when an operator of the add-on was never driven by an event in
+any of them (the coverage line; the runner reads what the Info editor logged as run).
 ``--pictures DIR`` runs the picture takers (``tests/gui/pictures.py``) instead and writes the
 docs' pictures of the real window into DIR.
 """
@@ -23,6 +25,7 @@ import json
 import os
 import pathlib
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -41,6 +44,20 @@ TEST_TIMEOUT_S = 240
 
 class GuiSetupFailed(Exception):
     pass
+
+
+def run_session(command, timeout=None, env=None):
+    """``subprocess.run(command)`` in a session of its own: on a timeout the whole session (Blender
+    and the X server xvfb-run started for it) is killed, and nothing else on the machine."""
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                          start_new_session=True) as process:
+        try:
+            stdout, stderr = process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired as exc:
+            os.killpg(process.pid, signal.SIGKILL)
+            exc.stdout, exc.stderr = process.communicate()
+            raise
+    return subprocess.CompletedProcess(command, process.returncode, stdout, stderr)
 
 
 def run(command, **kwargs):
@@ -110,8 +127,7 @@ class Chroot:
 
     def shell(self, script, root=None, env=None, timeout=None):
         exports = "".join(f"export {k}={v}; " for k, v in (env or {}).items())
-        return subprocess.run(["chroot", str(root or self.root), "bash", "-c", exports + script],
-                              capture_output=True, text=True, timeout=timeout)
+        return run_session(["chroot", str(root or self.root), "bash", "-c", exports + script], timeout=timeout)
 
     def path(self, host_path):
         """Where a file of the project is seen inside."""
@@ -136,8 +152,7 @@ class Host:
         pass
 
     def shell(self, script, env=None, timeout=None):
-        return subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=timeout,
-                              env=dict(os.environ, **(env or {})))
+        return run_session(["bash", "-c", script], timeout=timeout, env=dict(os.environ, **(env or {})))
 
     def path(self, host_path):
         return str(pathlib.Path(host_path).resolve())
@@ -199,6 +214,7 @@ def main():
             return 1
         todo = [("pictures", "take_pictures")] if args.pictures else tests(args.k)
         passed = failed = 0
+        operators, driven = set(), set()
         for module, name in todo:
             result = out / f"{module}.{name}.json"
             extra = f" --pictures {where.path(pathlib.Path(args.pictures))}" if args.pictures else ""
@@ -210,13 +226,14 @@ def main():
                 done = where.shell(command, env=env, timeout=TEST_TIMEOUT_S)
                 log = done.stdout + done.stderr
             except subprocess.TimeoutExpired as exc:
-                log = f"timed out after {TEST_TIMEOUT_S} s\n{exc.stdout or ''}{exc.stderr or ''}"
-                where.shell("pkill -f -- '--enable-event-simulate' || true")
+                log = f"timed out after {TEST_TIMEOUT_S} s (killed)\n{exc.stdout or ''}{exc.stderr or ''}"
             (out / f"{module}.{name}.log").write_text(log if isinstance(log, str) else log.decode(errors="replace"))
             outcome = json.loads(result.read_text()) if result.exists() else {"passed": False, "message":
                                                                                "no result (Blender crashed or hung): "
                                                                                + log.strip()[-800:]}
             seconds = time.monotonic() - begun
+            operators.update(outcome.get("operators", ()))
+            driven.update(outcome.get("driven", ()))
             if outcome["passed"]:
                 passed += 1
                 print(f"PASSED {module}::{name} ({seconds:.0f} s)", flush=True)
@@ -225,6 +242,16 @@ def main():
                 print(f"FAILED {module}::{name} ({seconds:.0f} s): {outcome['message']}", flush=True)
                 if outcome.get("screenshot"):
                     print(f"       screenshot: {result.with_suffix('.png')}", flush=True)
+        if operators and not args.pictures:
+            never = sorted(operators - driven)
+            if not never:
+                print(f"PASSED coverage: all {len(operators)} operators of the add-on driven by events", flush=True)
+            elif args.k:  # a partial run: says what it drove, fails nothing
+                print(f"coverage of this run: {len(operators) - len(never)} of {len(operators)} operators driven by "
+                      f"events; not: {', '.join(never)}", flush=True)
+            else:
+                failed += 1
+                print(f"FAILED coverage: never driven by an event in any GUI test: {', '.join(never)}", flush=True)
         print(f"gui: {time.monotonic() - started:.0f} s in all")
         print(f"{passed} passed, {failed} failed")
         return 1 if failed or not todo else 0

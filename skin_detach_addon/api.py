@@ -315,12 +315,45 @@ def handle_vertex_count(empty):
 
 
 def remove_handle(empty):
-    """Delete a handle or anchor empty (and prepare the layout of those left, see :func:`prepare`)."""
+    """Delete a handle or anchor empty and put the mesh where the rig left says at once: solved
+    from rest as :func:`deform` solves, or the rest shape (bit-exact) when every handle and anchor
+    left is at rest (anchors alone hold the mesh at rest). A mesh edited since Skin Detach last
+    wrote it (sculpted), or a rig that cannot be opened (its proxy edited), keeps its shape: the
+    handle just goes. Then prepares the layout of those left (see :func:`prepare`). Raises,
+    removing nothing, while the mesh is in Edit Mode (a pose is never written there); raises
+    after the removal only when the rig left cannot be solved (a non-finite transform), saying so."""
+    import bpy
     _check_handle(empty)
     obj = handles.owner(empty)
+    name = empty.name
+    deformation = None
+    if obj is not None and is_bound(obj) and stored.holds_written(obj):
+        if obj.mode == 'EDIT' or obj.data.is_editmode:
+            raise SkinDetachError(f"object {obj.name!r}: expected Object Mode to remove {name!r} (the mesh is "
+                                  f"then solved without it), it is in Edit Mode")
+        try:
+            deformation = Deformation(obj, require_unedited=False)
+        except SkinDetachError:
+            deformation = None
     handles.remove(empty)
+    if deformation is not None:
+        bpy.context.view_layer.update()  # world matrices of handles moved by a script
+        try:
+            if all(_at_rest(obj, other) for other in deformation.handles()):
+                deformation.reset()
+            else:
+                deformation.step()
+        except SkinDetachError as exc:
+            raise SkinDetachError(f"handle {name!r} was removed, but the rig left cannot be solved: {exc}") from None
     if obj is not None and is_bound(obj):
         _prepare_after_change(obj)
+
+
+def _at_rest(obj, empty):
+    """The handle or anchor ``empty`` of ``obj`` is where it was made (to float32 rounding)."""
+    motion = handles.local_motion(obj, empty)
+    scale = max(1.0, float(np.abs(handles.rest_local_of(empty)[:3, 3]).max()))
+    return bool(np.allclose(motion, np.eye(4), rtol=0.0, atol=1e-6 * scale))
 
 
 def _check_handle(empty):

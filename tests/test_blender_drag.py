@@ -67,6 +67,52 @@ def test_drag_axis_and_rotate_keys_then_confirm(scene):
     binding.check_unedited(obj)  # the confirmed shape is what Skin Detach wrote
 
 
+def _turn_of(before, after):
+    """(3, 3) rotation taking the world matrix ``before`` to ``after``."""
+    return np.array(after)[:3, :3] @ np.linalg.inv(np.array(before)[:3, :3])
+
+
+def test_a_mode_switch_keeps_what_the_typed_number_did_and_clears_it(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    start = handle.matrix_world.copy()
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    for key in ("R", "THREE", "ZERO"):                    # R 30: a turn of 30 degrees
+        session.event(key, "PRESS", (0, 0))
+    session.event("MOUSEMOVE", "NOTHING", (50, 50))       # ignored while the number is typed
+    turned = _turn_of(start, handle.matrix_world)
+    session.event("G", "PRESS", (50, 50))                 # G: the turn is kept, "30" is no 30-unit move
+    assert session.typed == "" and "typed" not in session.header
+    assert np.allclose(_turn_of(start, handle.matrix_world), turned, atol=1e-5)
+    assert np.allclose(np.array(handle.matrix_world)[:3, 3], np.array(start)[:3, 3], atol=1e-5)
+    session.event("MOUSEMOVE", "NOTHING", (60, 50))       # the mouse moves it from where it is now
+    assert np.allclose(np.array(handle.matrix_world)[:3, 3] - np.array(start)[:3, 3], (0.1, 0.0, 0.0), atol=1e-5)
+    session.event("X", "PRESS", (60, 50))                  # an axis for the move: the turn stays about the view axis
+    assert np.allclose(_turn_of(start, handle.matrix_world), turned, atol=1e-5)
+    session.event("TWO", "PRESS", (60, 50))                # 2 along X, on top of the mouse's 0.1
+    session.event("S", "PRESS", (60, 50))                  # S: the move is kept, the scale starts at 1
+    assert session.typed == ""
+    assert np.allclose(np.array(handle.matrix_world)[:3, 3] - np.array(start)[:3, 3], (2.1, 0.0, 0.0), atol=1e-5)
+    assert np.allclose(_turn_of(start, handle.matrix_world), turned, atol=1e-5)
+    assert session.event("RET", "PRESS", (60, 50)) == FINISHED
+    angle = np.degrees(np.arccos((np.trace(turned) - 1) / 2))
+    assert abs(angle - 30.0) < 1e-3
+
+
+def test_typed_r_turns_as_blenders_r_clockwise_seen_from_the_view(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    start = handle.matrix_world.copy()
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))   # looking down -Z
+    for key in ("R", "NINE", "ZERO"):
+        session.event(key, "PRESS", (0, 0))
+    # Blender's R 90 in a top view: rotation Z -90 degrees (clockwise seen from above).
+    assert np.allclose(_turn_of(start, handle.matrix_world), [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], atol=1e-5)
+    session.event("Z", "PRESS", (0, 0))                    # R Z 90: +90 about Z, as Blender's R Z 90
+    assert np.allclose(_turn_of(start, handle.matrix_world), [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-5)
+    assert session.event("ESC", "PRESS", (0, 0)) == CANCELLED
+
+
 def test_drag_operator_scripted_path_moves_the_active_handle(scene):
     obj = import_spot()
     handle = rig(obj, axis=1)
@@ -151,21 +197,34 @@ def test_drag_confirm_writes_what_the_last_move_showed_and_apply_forgets_the_pat
 
 
 def test_the_object_menus_list_every_operator(scene):
+    """F3 searches menus: every operator of the add-on is in the Skin Detach menu (or its
+    submenus), which the Object menu and, in Edit Mode, the Mesh menu hold."""
+    from skin_detach_addon import api, ui
     from skin_detach_addon.ui import menus
+    obj = import_spot()
+    rig(obj, axis=1)
+    activate(obj)
     drawn = []
 
     class Layout:
         def operator(self, idname, **_):
             drawn.append(idname)
+            return type("Properties", (), {})()
+
+        def menu(self, idname, **_):
+            getattr(bpy.types, idname).draw(type("Menu", (), {"layout": self})(), bpy.context)
 
         def separator(self):
             pass
 
+        def label(self, **_):
+            pass
+
     menus.VIEW3D_MT_skin_detach.draw(type("Menu", (), {"layout": Layout()})(), bpy.context)
-    for idname in ("skin_detach.build", "skin_detach.add_handle", "skin_detach.add_anchor", "skin_detach.drag",
-                   "skin_detach.apply", "skin_detach.reset", "skin_detach.clear"):
-        assert idname in drawn
-    for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu"):
+    operators = {cls.bl_idname for cls in ui.CLASSES if issubclass(cls, bpy.types.Operator)}
+    assert operators - set(drawn) == set(), f"not in the menus (F3 cannot find them): {operators - set(drawn)}"
+    assert drawn.count("skin_detach.select_handle") == len(api.handles_of(obj))
+    for name in ("VIEW3D_MT_object", "VIEW3D_MT_object_context_menu", "VIEW3D_MT_edit_mesh"):
         assert menus._menu_entry in getattr(bpy.types, name)._dyn_ui_initialize()
 
 

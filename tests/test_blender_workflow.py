@@ -179,11 +179,16 @@ def test_numbers_typed_in_the_drag_set_exact_moves_angles_and_factors(scene):
     assert np.allclose(moved[:3, 3] - start[:3, 3], (0.4, -0.25, 0.0), atol=1e-9)
     assert "-0.25 typed" in session.header
     session.event("BACK_SPACE", "PRESS", (90, 70))           # -0.2
-    assert np.allclose(np.array(handle.matrix_world)[:3, 3] - start[:3, 3], (0.4, -0.2, 0.0), atol=1e-9)
-    session.event("R", "PRESS", (90, 70))                    # the same number as degrees about Y
+    moved_back = np.array(handle.matrix_world)
+    assert np.allclose(moved_back[:3, 3] - start[:3, 3], (0.4, -0.2, 0.0), atol=1e-9)
+    session.event("R", "PRESS", (90, 70))                    # the move is kept, the number cleared
+    assert session.typed == "" and np.allclose(np.array(handle.matrix_world), moved_back, atol=1e-9)
+    for key in ("MINUS", "TWO", "FIVE"):                     # -25 degrees about Y (the right hand)
+        session.event(key, "PRESS", (90, 70))
     turned = np.array(handle.matrix_world)
-    c, s = np.cos(np.radians(-0.2)), np.sin(np.radians(-0.2))
+    c, s = np.cos(np.radians(-25)), np.sin(np.radians(-25))
     assert np.allclose(turned[:3, :3], np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]) @ start[:3, :3], atol=1e-9)
+    assert np.allclose(turned[:3, 3], moved_back[:3, 3], atol=1e-9)
     assert session.event("RET", "PRESS", (90, 70)) == FINISHED
     assert np.isfinite(positions(obj)).all()
 

@@ -27,7 +27,7 @@ MODES = (SHAPE_KEYS, OBJECTS, FILES)
 #: Baked shape keys are named ``skin_detach_0012`` (the frame number, zero-padded).
 KEY_PREFIX = "skin_detach_"
 #: Baked objects go into this collection, tagged with ``{"owner": obj, "frame": f}``.
-BAKE_COLLECTION = "Skin Detach Bake"
+BAKE_COLLECTION = "Baked Frames"  # not named after the add-on: see skin_rig.RIG_COLLECTION
 BAKE_TAG = "_skin_detach_bake"
 FORMATS = (".obj", ".ply")
 
@@ -180,7 +180,7 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     into             SHAPE_KEYS: one shape key per frame, keyed 0-1-0 around its frame
                      (linear), so playback shows the animation without the add-on;
                      OBJECTS: one new object per frame (a copy carrying the mesh's UVs,
-                     materials and vertex groups) in the "Skin Detach Bake" collection;
+                     materials and vertex groups) in the "Baked Frames" collection;
                      FILES: one .obj or .ply file per frame at ``path`` (see :func:`file_path`),
                      with UVs, written by Blender's own exporter.
     apply_modifiers  FILES only: export with the object's modifiers applied (default: the mesh

@@ -77,8 +77,9 @@ class DragSession:
     distance from the centre on screen over that distance when S was pressed; along the
     constrained axis only when one is set); pressing R or S again goes back to moving. Typing a
     number (digits, point, minus; Backspace edits) sets the move distance along the axis (X when
-    free), the angle in degrees or the scale factor exactly, on top of what the mouse did before;
-    the mouse is ignored while a number is typed. LMB/Enter confirms, RMB/Esc restores the
+    free), the angle in degrees (turning as Blender's R turns) or the scale factor exactly, on top
+    of what the mouse did before; the mouse is ignored while a number is typed. G, R or S keeps
+    what the typed number did and clears it (a number belongs to its mode, as in Blender). LMB/Enter confirms, RMB/Esc restores the
     empties, the mesh and the proxy exactly as they were. A session ends with one of them:
     only the confirm records the written positions (moves skip that per-move checksum).
 
@@ -109,6 +110,9 @@ class DragSession:
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
         self.translation, self.angle = Vector((0.0, 0.0, 0.0)), 0.0
+        #: (3, 3) the turns of the rotate modes left before (``angle`` is the current one's, about
+        #: the current axis: an axis key in another mode does not turn them about another axis).
+        self.turned = Matrix.Identity(3)
         self.stretch = Matrix.Identity(3)
         #: What the drag did to the handle, as :func:`moved_matrix` takes it: translation (3,),
         #: rotation (3, 3), scale (3,) along the world axes (a stretch is always along them).
@@ -175,13 +179,20 @@ class DragSession:
                 self.typed = before
                 self.refused = f"{_TYPED.get(kind, kind)!r} refused: {str(exc)[:100]}"
                 self._apply_typed()
-        elif kind in _AXES or kind in _MODES:
+        elif kind in _MODES:  # the typed number belongs to its mode (as in Blender): done, and cleared
+            if self.typed:  # the mouse was ignored meanwhile: it counts from here
+                self.translation, self.angle, self.stretch = self._typed_offsets()
+                self.typed = self.refused = ""
+                self._reference = Vector(mouse)
+            else:
+                self._settle(Vector(mouse))
+            self.turned, self.angle = self._turn(self.angle) @ self.turned, 0.0
+            self.mode = "MOVE" if self.mode == _MODES[kind] else _MODES[kind]
+            self._follow(Vector(mouse))
+        elif kind in _AXES:  # a typed number stays, now along the new axis
             if not self.typed:
                 self._settle(Vector(mouse))
-            if kind in _MODES:
-                self.mode = "MOVE" if self.mode == _MODES[kind] else _MODES[kind]
-            else:
-                self.axis = None if self.axis == kind else kind
+            self.axis = None if self.axis == kind else kind
             if self.typed:
                 self._apply_typed()
             else:
@@ -189,8 +200,13 @@ class DragSession:
         return RUNNING
 
     def _apply_typed(self):
-        """The typed number as a distance (move: along the constrained axis, X when free), an
-        angle in degrees (rotate) or a factor (scale), on top of the settled offsets."""
+        self._place(*self._typed_offsets())
+
+    def _typed_offsets(self):
+        """(translation (3,), angle, stretch (3, 3)): the typed number as a distance (move: along
+        the constrained axis, X when free), an angle in degrees (rotate: as Blender's R turns,
+        clockwise as seen from the view when free, by the right hand about a constrained axis) or
+        a factor (scale), on top of the settled offsets."""
         try:
             number = float(self.typed)
         except ValueError:  # "-" or "." so far: nothing yet
@@ -200,11 +216,11 @@ class DragSession:
             self._check_typed(number)
             if self.mode == "MOVE":
                 translation += _AXES[self.axis or "X"] * number
-            elif self.mode == "ROTATE":
-                angle += math.radians(number)
+            elif self.mode == "ROTATE":  # free: _turn's axis points at the viewer, Blender's R away from them
+                angle += math.radians(number) if self.axis else -math.radians(number)
             else:
                 stretch = _stretch(number, self.axis) @ stretch
-        self._place(translation, angle, stretch)
+        return translation, angle, stretch
 
     def _check_typed(self, number):
         """Raise (a short message, for the header) for a typed number that would fling the mesh away."""
@@ -247,7 +263,7 @@ class DragSession:
         return Matrix.Rotation(angle, 3, _AXES[self.axis] if self.axis else -Vector(self.view.direction))
 
     def _motion(self, translation, angle, stretch):
-        return translation.copy(), self._turn(angle), Vector([stretch[i][i] for i in range(3)])
+        return translation.copy(), self._turn(angle) @ self.turned, Vector([stretch[i][i] for i in range(3)])
 
     def _follow(self, mouse):
         self._place(*self._offsets(mouse))

@@ -14,9 +14,16 @@ from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io
 
-RIG_COLLECTION = "Skin Detach"
-#: A collection the add-on made carries its role under this key ("Skin Detach", "Skin Detach Bake").
+#: The collection of each scene that holds its rigs (proxies, previews, handles). Not named after
+#: the add-on: F3 "skin detach" would list "Add > Collection Instance > Skin Detach" first (a
+#: whole name matched), and Enter would instance the rigs.
+RIG_COLLECTION = "Proxy Rigs"
+#: A collection the add-on made carries its name under this key (its role: renamed by hand, it is
+#: still found).
 COLLECTION_TAG = "_skin_detach_collection"
+#: Names (and tags) of the add-on's collections in files of earlier versions -> the name now;
+#: such a collection is renamed when found.
+OLD_COLLECTION_NAMES = {"Skin Detach": RIG_COLLECTION, "Skin Detach Bake": "Baked Frames"}
 PROXY_TAG = stored.PROXY_TAG
 PREVIEW_TAG = stored.PREVIEW_TAG
 #: Meshes with more vertices than this get a preview by default (see :func:`build`): a drag move
@@ -210,7 +217,13 @@ def scene_collection(name, scene=None):
     import bpy
     scene = scene or bpy.context.scene
     for child in scene.collection.children:
-        if child.get(COLLECTION_TAG) == name:
+        tag = child.get(COLLECTION_TAG)
+        if tag == name:
+            return child
+        if OLD_COLLECTION_NAMES.get(tag) == name:  # an earlier version's: renamed as it is now
+            child[COLLECTION_TAG] = name
+            if child.name == tag:
+                child.name = name
             return child
     collection = bpy.data.collections.new(name)
     collection[COLLECTION_TAG] = name
@@ -223,8 +236,8 @@ def _remove_empty(collections):
     (also the untagged one of files from earlier versions)."""
     import bpy
     for collection in collections:
-        if (collection.get(COLLECTION_TAG) == RIG_COLLECTION or collection.name == RIG_COLLECTION) \
-                and not collection.all_objects:
+        tag = collection.get(COLLECTION_TAG, collection.name)  # untagged: an earlier version's, by name
+        if OLD_COLLECTION_NAMES.get(tag, tag) == RIG_COLLECTION and not collection.all_objects:
             bpy.data.collections.remove(collection)
 
 

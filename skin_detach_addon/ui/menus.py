@@ -6,12 +6,33 @@ Keymap."""
 
 import bpy
 
+from .. import api
+
 #: The Drag Handle key in Object Mode (Preferences > Keymap > Object Mode > Skin Detach).
 DRAG_KEY = {"type": 'D', "value": 'PRESS', "shift": True, "alt": True}
 _keymaps = []
 
 
+class VIEW3D_MT_skin_detach_handles(bpy.types.Menu):
+    """The rig's handles and anchors, as the panel lists them: each entry makes it active."""
+    bl_idname = "VIEW3D_MT_skin_detach_handles"
+    bl_label = "Select Handle"
+
+    def draw(self, context):
+        obj = api.mesh_of(context.active_object)
+        empties = api.handles_of(obj) if api.is_bound(obj) else []
+        for empty in empties:
+            try:
+                icon = 'EMPTY_AXIS' if api.handle_kind(empty) == api.HANDLE else 'PINNED'
+            except api.SkinDetachError:
+                icon = 'ERROR'  # a damaged handle: listed, as in the panel, so that it can be removed
+            self.layout.operator("skin_detach.select_handle", text=empty.name, icon=icon).name = empty.name
+        if not empties:
+            self.layout.label(text="No handles (Add Handle first)")
+
+
 class VIEW3D_MT_skin_detach(bpy.types.Menu):
+    """Every command of the add-on (F3 searches menus: each is found there, in Object and Edit Mode)."""
     bl_idname = "VIEW3D_MT_skin_detach"
     bl_label = "Skin Detach"
 
@@ -21,6 +42,9 @@ class VIEW3D_MT_skin_detach(bpy.types.Menu):
         layout.separator()
         layout.operator("skin_detach.add_handle", icon='EMPTY_SINGLE_ARROW')
         layout.operator("skin_detach.add_anchor", icon='PINNED')
+        layout.menu(VIEW3D_MT_skin_detach_handles.bl_idname, icon='RESTRICT_SELECT_OFF')
+        layout.operator("skin_detach.remove_handle", icon='X')
+        layout.separator()
         layout.operator("skin_detach.drag", icon='VIEW_PAN')
         layout.operator("skin_detach.apply", icon='CHECKMARK')
         layout.operator("skin_detach.show_stretch", icon='MOD_SMOOTH')
@@ -41,7 +65,7 @@ def _edit_context_entries(self, context):
     layout.operator("skin_detach.add_anchor", icon='PINNED')
 
 
-CLASSES = (VIEW3D_MT_skin_detach,)
+CLASSES = (VIEW3D_MT_skin_detach_handles, VIEW3D_MT_skin_detach)
 #: Menu -> the entry appended to it.
 _MENUS = {"VIEW3D_MT_object": _menu_entry, "VIEW3D_MT_object_context_menu": _menu_entry,
           "VIEW3D_MT_edit_mesh": _menu_entry, "VIEW3D_MT_edit_mesh_context_menu": _edit_context_entries}

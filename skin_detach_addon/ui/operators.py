@@ -27,8 +27,17 @@ def solve_report(stats):
     return {'INFO'}, f"Skin Detach: {text}"
 
 
+def leave_edit_mode(context):
+    """Object Mode when the active object is in Edit Mode (as Build and Add Handle leave it): a
+    command found there (its menu, F3) then runs instead of refusing, since Skin Detach never
+    writes a mesh under Edit Mode."""
+    if context.active_object is not None and context.active_object.mode == 'EDIT':
+        bpy.ops.object.mode_set(mode='OBJECT')
+
+
 def deform_and_report(operator, context):
     """Solve the bound mesh behind the active object from its handles, tell live update, report."""
+    leave_edit_mode(context)
     obj = bound_owner(context)
     stats = api.deform(obj, context.scene.skin_detach.preserve_volume)
     live_update.remember(obj)
@@ -60,10 +69,11 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
     target_faces: bpy.props.IntProperty(
         name="Proxy Faces", description="Number of faces of the proxy the detail mesh is bound to "
-        "(default: the panel's value)", default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000)
+        "(default: the panel's value)", default=1000, min=4, max=200_000, soft_min=100, soft_max=20_000,
+        options={'SKIP_SAVE'})
     normal_test: bpy.props.BoolProperty(
         name="Normal Test", default=True, description="Refuse proxy edge collapses that would turn proxy faces "
-        "away from the detail they carry (default: the panel's value)")
+        "away from the detail they carry (default: the panel's value)", options={'SKIP_SAVE'})
 
     @classmethod
     def poll(cls, context):
@@ -72,8 +82,7 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
     def run(self, context):
         obj = api.mesh_of(context.active_object)
-        if obj.mode == 'EDIT':
-            bpy.ops.object.mode_set(mode='OBJECT')
+        leave_edit_mode(context)
         settings = context.scene.skin_detach
         for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
             if not self.properties.is_property_set(name):
@@ -108,9 +117,11 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 class _AddOperator(_BoundOperator):
     kind = api.HANDLE
     bl_options = {'REGISTER', 'UNDO'}
-    group: bpy.props.StringProperty(name="Vertex Group", default="",
+    # SKIP_SAVE: a value is for the press it was given to (the Group field's +, the Redo panel),
+    # never remembered into the next plain press.
+    group: bpy.props.StringProperty(name="Vertex Group", default="", options={'SKIP_SAVE'},
                                     description="Make it from this vertex group instead of the selection")
-    mirror: bpy.props.EnumProperty(name="Mirror", default='NONE',
+    mirror: bpy.props.EnumProperty(name="Mirror", default='NONE', options={'SKIP_SAVE'},
                                    items=(('NONE', "Off", ""), ('X', "X", ""), ('Y', "Y", ""), ('Z', "Z", "")),
                                    description="Also make the mirrored twin (default: the panel's setting)")
 
@@ -163,17 +174,28 @@ def _named_handle(context, name):
 
 
 class SKIN_DETACH_OT_remove_handle(_BoundOperator, bpy.types.Operator):
-    """Remove a handle or anchor (the active one, or the one named)"""
+    """Remove a handle or anchor (the active one, or the one named); the mesh takes the shape of
+    the handles left at once"""
     bl_idname = "skin_detach.remove_handle"
     bl_label = "Remove Handle"
     bl_options = {'REGISTER', 'UNDO'}
-    name: bpy.props.StringProperty(name="Handle", default="")
+    name: bpy.props.StringProperty(name="Handle", default="", options={'SKIP_SAVE'})
 
     def run(self, context):
         empty = _named_handle(context, self.name)
-        name = empty.name
-        api.remove_handle(empty)
-        self.report({'INFO'}, f"Skin Detach: removed {name}")
+        name, obj = empty.name, api.mesh_of(empty)
+        leave_edit_mode(context)  # the mesh is then solved without it
+        if empty == context.active_object and obj is not None and obj.name in context.view_layer.objects:
+            context.view_layer.objects.active = obj  # the panel goes on listing the rig's handles
+        try:
+            api.remove_handle(empty)
+        except SkinDetachError as exc:
+            if name in bpy.data.objects:
+                raise  # nothing was removed
+            self.report({'WARNING'}, f"Skin Detach: {exc}")  # removed: the step stays (and is undone as one)
+            return {'FINISHED'}
+        live_update.remember(obj)  # the mesh is solved for the handles left
+        self.report({'INFO'}, f"Skin Detach: removed {name}; the mesh follows the handles left")
         return {'FINISHED'}
 
 
@@ -182,10 +204,11 @@ class SKIN_DETACH_OT_select_handle(_Operator, bpy.types.Operator):
     bl_idname = "skin_detach.select_handle"
     bl_label = "Select Handle"
     bl_options = {'REGISTER', 'UNDO'}
-    name: bpy.props.StringProperty(name="Handle", default="")
+    name: bpy.props.StringProperty(name="Handle", default="", options={'SKIP_SAVE'})
 
     def run(self, context):
         empty = _named_handle(context, self.name)
+        leave_edit_mode(context)
         for obj in context.selected_objects:
             obj.select_set(False)
         empty.select_set(True)
@@ -210,11 +233,12 @@ class SKIN_DETACH_OT_drag(_Operator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
     # What the drag did, shown in the Redo panel (and the scripted use): scale along the world
     # axes and rotation about the handle's position, then the move; see api.moved_matrix.
-    offset: bpy.props.FloatVectorProperty(name="Move", subtype='TRANSLATION', size=3,
+    offset: bpy.props.FloatVectorProperty(name="Move", subtype='TRANSLATION', size=3, options={'SKIP_SAVE'},
                                           description="World-space move of the handle")
-    rotation: bpy.props.FloatVectorProperty(name="Rotation", subtype='EULER', size=3,
+    rotation: bpy.props.FloatVectorProperty(name="Rotation", subtype='EULER', size=3, options={'SKIP_SAVE'},
                                             description="Turn of the handle about its own position (world axes)")
     scale: bpy.props.FloatVectorProperty(name="Scale", subtype='XYZ', size=3, default=(1.0, 1.0, 1.0),
+                                         options={'SKIP_SAVE'},
                                          description="Scale of the handle along the world axes about its position")
 
     @classmethod
@@ -293,6 +317,7 @@ class SKIN_DETACH_OT_reset(_BoundOperator, bpy.types.Operator):
     bl_options = {'REGISTER', 'UNDO'}
 
     def run(self, context):
+        leave_edit_mode(context)
         obj = bound_owner(context)
         api.reset(obj)
         live_update.remember(obj)
@@ -312,6 +337,7 @@ class SKIN_DETACH_OT_clear(_Operator, bpy.types.Operator):
         return bound_owner(context) is not None or api.orphan_owner(context.active_object) is not None
 
     def run(self, context):
+        leave_edit_mode(context)
         obj = bound_owner(context)
         if obj is None:
             name = api.clear_orphan(context.active_object)
