@@ -121,3 +121,29 @@ def test_a_handle_parented_to_another_handles_empty_follows_its_world_transform(
     bpy.context.view_layer.update()
     assert np.abs(np.array(hand.matrix_world) - np.array(hand_start)).max() <= 1e-6
     assert np.array_equal(mesh_io.read_positions(obj.data), api.rest_positions(obj))
+
+
+def test_a_rebuild_keeps_a_hand_parented_to_its_forearm(scene):
+    """Rebuild puts every handle back at rest on the new proxy; a hand parented to the forearm's
+    empty stays its child, and still follows its own world transform exactly."""
+    obj = import_spot()
+    api.build(obj, target_faces=300)
+    y = api.rest_positions(obj)[:, 1]
+    api.add_anchor(obj, np.flatnonzero(y < np.quantile(y, 0.15)))
+    forearm_ids = np.flatnonzero((y > np.quantile(y, 0.6)) & (y <= np.quantile(y, 0.85)))
+    hand_ids = np.flatnonzero(y > np.quantile(y, 0.85))
+    forearm, hand = api.add_handle(obj, forearm_ids), api.add_handle(obj, hand_ids)
+    bpy.context.view_layer.update()
+    hand.parent = forearm
+    hand.matrix_parent_inverse = forearm.matrix_world.inverted()
+    forearm.rotation_euler = (0.0, 0.0, 0.4)
+    api.deform(obj)
+    api.build(obj, target_faces=300)  # Rebuild: the pose is the new rest
+    assert hand.parent == forearm and {forearm, hand} <= set(api.handles_of(obj))
+    bpy.context.view_layer.update()
+    assert _off(obj, forearm, forearm_ids) <= 1e-7 and _off(obj, hand, hand_ids) <= 1e-7  # at rest
+    forearm.location.x += 0.1
+    hand.rotation_euler = (0.3, 0.0, 0.0)
+    api.deform(obj)
+    assert _off(obj, forearm, forearm_ids) <= EXACT
+    assert _off(obj, hand, hand_ids) <= EXACT

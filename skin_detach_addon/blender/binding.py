@@ -17,7 +17,7 @@ import numpy as np
 from ..core.errors import SkinDetachError
 from ..core.surface import Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
-from ..core.held_detail import layout_of, place_held
+from ..core.held_detail import HeldPlacement, layout_of
 from ..core.proxy_solves import ProxySolves
 from ..core.stretch import SkinStretch
 from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
@@ -59,6 +59,8 @@ class Binding:
         #: (layout key, the preview's held pairs) of the last preview rebuild's layout.
         self._preview_held = (None, [])
         self._layout = None
+        #: ("detail" or "preview") -> (layout key, its HeldPlacement).
+        self._placements = {}
         self.last_step = None
         self._mirrors = {}
         self._own_images = {}
@@ -109,7 +111,7 @@ class Binding:
         symmetric with ``mirror`` (the (n,) mirror map and the axis index, see
         :func:`.core.symmetry.symmetrize`), then every held vertex placed exactly by its group's
         (4, 4) motion in ``motions`` (one per pair of ``layout.held``;
-        :func:`.core.held_detail.place_held`), in a reused buffer (copy it to keep it past the
+        :class:`.core.held_detail.HeldPlacement`), in a reused buffer (copy it to keep it past the
         next call)."""
         if layout is None:
             out = self.surface.reconstruct(proxy_vertices, out=self._buffer)
@@ -118,7 +120,16 @@ class Binding:
                                            held=layout.held or None)
         if mirror is not None:
             out[...] = symmetrize(out, *mirror)
-        return out if layout is None else place_held(out, self.rest, layout.owned, motions)
+        return out if layout is None else self._placement("detail", layout, self.rest, layout.owned)(out, motions)
+
+    def _placement(self, which, layout, rest, pairs):
+        """The :class:`.core.held_detail.HeldPlacement` of ``layout``'s ``pairs`` over ``rest`` for the
+        mesh or the preview (``which``), made once per layout."""
+        key, placement = self._placements.get(which, (None, None))
+        if key != layout.key():
+            placement = HeldPlacement(rest, pairs)
+            self._placements[which] = (layout.key(), placement)
+        return placement
 
     def prepare(self, layout):
         """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and
@@ -147,7 +158,7 @@ class Binding:
         pairs = self._preview_held_of(layout)
         out = self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
                                                held=pairs or None)
-        return place_held(out, self.preview.points, pairs, motions)
+        return self._placement("preview", layout, self.preview.points, pairs)(out, motions)
 
 
 def has_binding(obj):

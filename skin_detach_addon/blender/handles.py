@@ -262,8 +262,11 @@ def remove(empty):
 
 def rebind(empty, proxy, proxy_ids, rest_centroid):
     """After a Rebuild: new ``proxy_ids`` and rest frame at ``rest_centroid`` (3,), the selection's
-    median point at rest, the empty back at rest on the new proxy."""
-    _parent_in_world(obj_of_proxy(proxy), empty, proxy, rest_centroid)
+    median point at rest, the empty on the new proxy (one parented to another handle's empty, a
+    hand to its forearm, keeps that parent: :func:`place_at_rest` puts it back at rest once its
+    parent is)."""
+    if not is_handle(empty.parent):
+        _parent_in_world(obj_of_proxy(proxy), empty, proxy, rest_centroid)
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
     props = empty[TAG]

@@ -28,9 +28,11 @@ PROXY_TAG = stored.PROXY_TAG
 PREVIEW_TAG = stored.PREVIEW_TAG
 #: Meshes with more vertices than this get a preview by default (see :func:`build`): a drag move
 #: writing every vertex (solve + rebuild + write + Blender's update) takes 28.6 ms at 200K and
-#: 33.9 ms at 300K vertices on the 2-core reference machine, so above it a move no longer fits in
-#: 33 ms (30 per second); with the preview it takes 17-22 ms at any size (README, figures).
-PREVIEW_ABOVE = 300_000
+#: 33.9 ms at 300K vertices on the 2-core reference machine (headless, without Blender's update,
+#: 20-25 ms at 300K with a 48-handle face rig), so above it a move no longer fits in 16 ms; with
+#: the preview the face rig's moves take 14 ms (median) and the build is faster (the library
+#: simplifies the clustered mesh: 2.6 s against 3.3 s at 300K).
+PREVIEW_ABOVE = 200_000
 #: Vertices of the preview (clusters of the detail mesh).
 PREVIEW_VERTICES = 60_000
 
@@ -157,6 +159,7 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
         else:
             handles.remove(empty)
             removed += 1
+    handles.place_at_rest(obj, handles.handles_of(obj, proxy))  # children of other handles: after them
     stats = dict(surface.stats)
     stats["handles_kept"], stats["handles_removed"] = kept, removed
     return stats

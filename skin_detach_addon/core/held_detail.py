@@ -96,23 +96,40 @@ def owned_pairs(held):
     return owned[::-1]
 
 
+class HeldPlacement:
+    """Places held vertices by their groups' motions: made once per layout from ``rest`` (n, 3)
+    the rest positions and ``pairs`` (group label, ids (h,)), each vertex in one pair
+    (:func:`owned_pairs`); ``__call__(out (n, 3), motions)`` writes ``out[ids] = rest[ids] A^T + b``
+    for each pair and its (4, 4) motion [A b] (one per pair), in float64 from the rest gathered
+    once (a drag move of a 48-handle rig: one scatter, not 49 gathers). Exact under any affine
+    motion; the identity gives the rest back bit for bit."""
+
+    def __init__(self, rest, pairs):
+        self.ids = np.concatenate([ids for _, ids in pairs]).astype(np.int64) if pairs else np.zeros(0, np.int64)
+        self.bounds = np.cumsum([0] + [ids.size for _, ids in pairs])
+        self.rest = np.asarray(rest[self.ids], dtype=np.float64)
+        self._moved = np.empty_like(self.rest)
+
+    def __call__(self, out, motions):
+        if not self.ids.size:
+            return out
+        moved = self._moved
+        for (a, b), motion in zip(zip(self.bounds[:-1], self.bounds[1:]), motions):
+            if b > a:
+                motion = np.asarray(motion, dtype=np.float64)
+                np.matmul(self.rest[a:b], motion[:3, :3].T, out=moved[a:b])
+                moved[a:b] += motion[:3, 3]
+        out[self.ids] = moved
+        return out
+
+
 def place_held(out, rest, pairs, motions):
     """Write into ``out`` (n, 3) float32 or float64 every held vertex where its group's motion puts
     it: ``out[ids] = rest[ids] A^T + b`` for each pair (label, ids (h,)) of ``pairs`` and its (4, 4)
     motion [A b] in ``motions`` (one per pair), from ``rest`` (n, 3) the rest positions, computed in
-    float64. Exact under any affine motion; the identity gives the rest back bit for bit."""
-    for (_, ids), motion in zip(pairs, motions):
-        if not ids.size:
-            continue
-        motion = np.asarray(motion, dtype=np.float64)
-        if np.array_equal(motion, _IDENTITY):  # an anchor: its rest, with no product
-            out[ids] = rest[ids]
-        else:
-            out[ids] = rest[ids].astype(np.float64) @ motion[:3, :3].T + motion[:3, 3]
-    return out
-
-
-_IDENTITY = np.eye(4)
+    float64 (a one-off :class:`HeldPlacement`). Exact under any affine motion; the identity gives
+    the rest back bit for bit."""
+    return HeldPlacement(rest, pairs)(out, motions)
 
 
 def layout_of(last, groups, held):
