@@ -411,6 +411,8 @@ class SkinDetachedSurface:
         # The skin diffused over the whole detail mesh and its rebuild, once: every layout's rebuild
         # is this one with the rows near its held vertices replaced.
         surface._free_rebuild()
+        if preview is not None:  # the drag shows the preview: its free rebuild too, not in the first Add Handle
+            preview.surface._free_rebuild()
         surface.preview = preview
         done = time.perf_counter()
         stats["seconds"] = {
