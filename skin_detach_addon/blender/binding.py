@@ -115,12 +115,18 @@ class Binding:
         next call)."""
         if layout is None:
             out = self.surface.reconstruct(proxy_vertices, out=self._buffer)
-        else:
-            out = self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
-                                           held=layout.held or None)
-        if mirror is not None:
+            if mirror is not None:
+                out[...] = symmetrize(out, *mirror)
+            return out
+        placement = self._placement("detail", layout, self.rest, layout.owned)
+        if mirror is None and layout.held:  # the held rows placed, not rebuilt first
+            return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups, held=layout.held,
+                                            place=lambda out: placement(out, motions))
+        out = self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups,
+                                       held=layout.held or None)
+        if mirror is not None:  # symmetric first (its held rows rebuilt), then the held rows placed
             out[...] = symmetrize(out, *mirror)
-        return out if layout is None else self._placement("detail", layout, self.rest, layout.owned)(out, motions)
+        return placement(out, motions)
 
     def _placement(self, which, layout, rest, pairs):
         """The :class:`.core.held_detail.HeldPlacement` of ``layout``'s ``pairs`` over ``rest`` for the
@@ -156,9 +162,11 @@ class Binding:
         if layout is None:
             return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer)
         pairs = self._preview_held_of(layout)
-        out = self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
-                                               held=pairs or None)
-        return self._placement("preview", layout, self.preview.points, pairs)(out, motions)
+        if not pairs:
+            return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups)
+        placement = self._placement("preview", layout, self.preview.points, pairs)
+        return self.preview.surface.reconstruct(proxy_vertices, out=self._preview_buffer, groups=layout.groups,
+                                                held=pairs, place=lambda out: placement(out, motions))
 
 
 def has_binding(obj):

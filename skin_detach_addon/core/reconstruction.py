@@ -135,36 +135,44 @@ class Rebuild:
 
 class LayoutRebuild:
     """The rebuild of one layout of held vertices: the free rebuild (every detail row, the free
-    diffusion's; one for all layouts) with the rows the layout changes rebuilt by its own matrix.
+    diffusion's; one for all layouts) with the rows the layout changes rebuilt by its own matrices.
 
-    free   :class:`Rebuild` of the n detail rows
-    rows   (r,) int64 sorted detail rows the layout changes (within the diffusion's reach of a
-           held vertex)
-    own    :class:`Rebuild` of those r rows
+    free    :class:`Rebuild` of the n detail rows
+    rows    (r,) int64 sorted detail rows the layout changes that no group holds (within the
+            diffusion's reach of a held vertex)
+    own     :class:`Rebuild` of those r rows
+    held    (h,) int64 sorted detail rows the layout's groups hold (their selections)
+    own_held :class:`Rebuild` of those h rows
 
-    ``__call__(points (m, 3), out=None)`` returns (n, 3) as :class:`Rebuild` does; the rows the
-    layout changes are those its own matrix gives, the others the free rebuild's, bit for bit.
-    Preparing a layout makes only ``own``: its cost follows the held vertices, not the mesh.
+    ``__call__(points (m, 3), out=None, place=None)`` returns (n, 3) as :class:`Rebuild` does;
+    the rows the layout changes are those its own matrices give, the others the free rebuild's,
+    bit for bit. ``place``, a callable writing the held rows into ``out`` (a caller that puts them
+    where their handles' motions say), replaces the held rows' product. Preparing a layout makes
+    only ``own`` and ``own_held``: its cost follows the held vertices, not the mesh.
     """
 
-    def __init__(self, free, rows, own):
+    def __init__(self, free, rows, own, held, own_held):
         self.free = free
-        self.rows = rows
-        self.own = own
+        self.rows, self.own = rows, own
+        self.held, self.own_held = held, own_held
         self.n_detail = free.n_detail
-        self.nnz = free.nnz + own.nnz
+        self.nnz = free.nnz + own.nnz + own_held.nnz
 
     def float32_blocks(self):
-        """Both rebuilds' float32 copies (see :meth:`Rebuild.float32_blocks`)."""
-        return self.free.float32_blocks(), self.own.float32_blocks()
+        """The rebuilds' float32 copies (see :meth:`Rebuild.float32_blocks`)."""
+        return self.free.float32_blocks(), self.own.float32_blocks(), self.own_held.float32_blocks()
 
     @property
     def float32_ready(self):
-        """Whether both float32 copies are made."""
-        return self.free.float32_ready and self.own.float32_ready
+        """Whether every float32 copy is made."""
+        return self.free.float32_ready and self.own.float32_ready and self.own_held.float32_ready
 
-    def __call__(self, points, out=None):
+    def __call__(self, points, out=None, place=None):
         out = self.free(points, out=out)
         if self.rows.size:
             out[self.rows] = self.own(points, out=np.empty((self.rows.size, 3), dtype=out.dtype))
+        if place is not None:
+            place(out)
+        elif self.held.size:
+            out[self.held] = self.own_held(points, out=np.empty((self.held.size, 3), dtype=out.dtype))
         return out

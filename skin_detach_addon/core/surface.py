@@ -233,9 +233,14 @@ class SkinDetachedSurface:
         check_coefficients(skin, "the diffused skin")
         changed = np.zeros(self.skin.case.shape[0], dtype=bool)
         changed[welded] = True
-        detail_rows = np.flatnonzero(changed[self.weld])
-        return LayoutRebuild(self._free_rebuild(), detail_rows,
-                             Rebuild(skin, self.weld[detail_rows], self.proxy_vertices, self.proxy_faces))
+        changed_rows = changed[self.weld]
+        placed = np.zeros(self.n_detail, dtype=bool)
+        for _, ids in held or []:
+            placed[np.asarray(ids, dtype=np.int64)] = True
+        rows, held_rows = np.flatnonzero(changed_rows & ~placed), np.flatnonzero(changed_rows & placed)
+        return LayoutRebuild(self._free_rebuild(),
+                             rows, Rebuild(skin, self.weld[rows], self.proxy_vertices, self.proxy_faces),
+                             held_rows, Rebuild(skin, self.weld[held_rows], self.proxy_vertices, self.proxy_faces))
 
     def _rebuild_for(self, groups, held=None):
         """The rebuild with the vertices carried by one rigid group held (``groups`` (m,) int64 or
@@ -422,7 +427,7 @@ class SkinDetachedSurface:
         report(1.0, "done")
         return surface
 
-    def reconstruct(self, proxy_vertices, out=None, groups=None, held=None):
+    def reconstruct(self, proxy_vertices, out=None, groups=None, held=None, place=None):
         """(n, 3) detail vertices rebuilt from deformed ``proxy_vertices`` (m, 3), into ``out`` if
         given: an (n, 3) float64 or float32 array (float32 computes in float32). ``groups`` (m,)
         int, optional: label of the rigid group (handle or anchor) each proxy vertex was moved
@@ -431,14 +436,19 @@ class SkinDetachedSurface:
         proxy bends); the first rebuild with a new layout of groups prepares its matrix. ``held``
         (pairs (group label, detail ids (h,)), optional, with ``groups``): detail vertices that
         move exactly with their group although some proxy corners they bind to are free (a
-        handle's selection: :mod:`.held_detail`); a later pair overrides an earlier one."""
+        handle's selection: :mod:`.held_detail`); a later pair overrides an earlier one. ``place``
+        (with ``held``): a callable that writes the held vertices into the (n, 3) result itself
+        (:class:`.held_detail.HeldPlacement` with their handles' motions), instead of their rebuild."""
         points = as_points("proxy_vertices", proxy_vertices, self.proxy_vertices.shape[0])
         groups, held = self._checked_layout(groups, held)
         if out is not None and (not isinstance(out, np.ndarray) or out.shape != (self.n_detail, 3)
                                 or out.dtype not in (np.float32, np.float64)):
             raise SkinDetachError(f"out: expected a ({self.n_detail}, 3) float32 or float64 array, got "
                                   f"{getattr(out, 'shape', type(out).__name__)} {getattr(out, 'dtype', '')}")
-        return self._rebuild_for(groups, held)(points, out=out)
+        if place is not None and held is None:
+            raise SkinDetachError("place: expected held detail (pairs of group label and detail ids) with it, got none")
+        rebuild = self._rebuild_for(groups, held)
+        return rebuild(points, out=out) if groups is None else rebuild(points, out=out, place=place)
 
     def prepare_layout(self, groups=None, held=None, float32=False):
         """Prepare the rebuild of a layout (``groups``, ``held`` as for :meth:`reconstruct`) now, so
