@@ -276,12 +276,17 @@ class RigRun:
 TURN_30 = ("R", "THREE", "ZERO")
 
 
-def limb_rig(name, points, triangles, faces, moves):
-    """The limb: shoulder anchor, upper arm, forearm, hand; each handle dragged in turn (G, then R 30)."""
+def limb_run(name, points, triangles, faces):
+    """A :class:`RigRun` of the limb: the shoulder anchored, (upper arm, forearm, hand) handles."""
     parts = limb(points, triangles)
     run = RigRun(name, points, triangles, faces)
     run.add("ANCHOR", parts["shoulder"])
-    arm = [run.add("HANDLE", parts[part]) for part in ("upper arm", "forearm", "hand")]
+    return run, [run.add("HANDLE", parts[part]) for part in ("upper arm", "forearm", "hand")]
+
+
+def limb_rig(name, points, triangles, faces, moves):
+    """The limb: shoulder anchor, upper arm, forearm, hand; each handle dragged in turn (G, then R 30)."""
+    run, arm = limb_run(name, points, triangles, faces)
     for held in arm:
         run.drag(held, (70, 70), moves)
         run.drag(held, (0, 0), 0, TURN_30)
@@ -291,10 +296,7 @@ def limb_rig(name, points, triangles, faces, moves):
 def parented_rig(name, points, triangles, faces, moves):
     """The limb with the hand's empty parented to the forearm's (Ctrl+P, Keep Transform); the forearm dragged."""
     import bpy
-    parts = limb(points, triangles)
-    run = RigRun(name, points, triangles, faces)
-    run.add("ANCHOR", parts["shoulder"])
-    _, forearm, hand = [run.add("HANDLE", parts[part]) for part in ("upper arm", "forearm", "hand")]
+    run, (_, forearm, hand) = limb_run(name, points, triangles, faces)
     for other in bpy.context.view_layer.objects:
         other.select_set(False)
     hand.empty.select_set(True)
