@@ -113,11 +113,8 @@ class Binding:
         (4, 4) motion in ``motions`` (one per pair of ``layout.held``;
         :class:`.core.held_detail.HeldPlacement`), in a reused buffer (copy it to keep it past the
         next call)."""
-        if layout is None:
-            out = self.surface.reconstruct(proxy_vertices, out=self._buffer)
-            if mirror is not None:
-                out[...] = symmetrize(out, *mirror)
-            return out
+        if layout is None:  # no handles: no rig to be symmetric
+            return self.surface.reconstruct(proxy_vertices, out=self._buffer)
         placement = self._placement("detail", layout, self.rest, layout.owned)
         if mirror is None and layout.held:  # the held rows placed, not rebuilt first
             return self.surface.reconstruct(proxy_vertices, out=self._buffer, groups=layout.groups, held=layout.held,

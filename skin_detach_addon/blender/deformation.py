@@ -83,7 +83,8 @@ class Deformation:
 
     def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`, the held
-        detail's (4, 4) motions, one per pair of the layout) from the handles' transforms (``follow``, ``budget_ms``, ``idle``: see
+        detail's (4, 4) motions, one per pair of the layout) from the handles' transforms
+        (``follow``, ``budget_ms``, ``idle``: see
         :meth:`.core.proxy_solves.ProxySolves.solve`)."""
         empties = self.handles()
         handle_symmetry.sync_twins(self.obj, empties)
@@ -132,9 +133,8 @@ class Deformation:
         """The detail of a solve: on a symmetric rig of a symmetric mesh made exactly symmetric
         (not just nearly), then every held vertex where its handle's motion puts it (a mesh
         symmetric only within the mirror tolerance keeps its selection exact)."""
-        detail = self.binding.rebuild(result.vertices, layout, motions,
-                                      mirror=(self.binding.mirror_map(axis), "XYZ".index(axis)) if axis else None)
-        return detail
+        mirror = (self.binding.mirror_map(axis), "XYZ".index(axis)) if axis else None
+        return self.binding.rebuild(result.vertices, layout, motions, mirror)
 
     def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, idle=False):
         """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the

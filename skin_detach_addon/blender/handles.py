@@ -211,11 +211,6 @@ def _parent_in_world(obj, empty, proxy, centre):
         empty.matrix_basis = Matrix(frame.tolist())
 
 
-def obj_of_proxy(proxy):
-    """The bound mesh object a proxy belongs to (its parent)."""
-    return proxy.parent
-
-
 def place_at_rest(obj, empties):
     """Put every handle and anchor of ``empties`` back on its rest frame, parents first (a handle
     parented to another handle's empty is placed once its parent is): its world matrix becomes
@@ -266,7 +261,7 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
     hand to its forearm, keeps that parent: :func:`place_at_rest` puts it back at rest once its
     parent is)."""
     if not is_handle(empty.parent):
-        _parent_in_world(obj_of_proxy(proxy), empty, proxy, rest_centroid)
+        _parent_in_world(proxy.parent, empty, proxy, rest_centroid)  # the proxy is its mesh object's child
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
     props = empty[TAG]
