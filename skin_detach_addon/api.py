@@ -33,7 +33,7 @@ from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
-           "remove_handle", "handle_conflicts", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
+           "remove_handle", "handle_conflicts", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "bake_file_path", "shutdown", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
            "handle_mirror", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
@@ -90,6 +90,21 @@ def prepare(obj, preserve_volume=True):
     is opened; a script that opens a file and drags may call it first. Nothing is written."""
     obj = _bound(obj)
     Deformation(obj, preserve_volume, require_unedited=False).prepare()
+
+
+def preparing(obj):
+    """(fraction done, stage) of the background job a large mesh's build left running (the
+    full-detail rebuild: a drag shows the preview meanwhile and Add Handle does not wait for it; a
+    confirm, Apply or bake does), or None when nothing is being prepared."""
+    record = stored.cached(_bound(obj))
+    surface = None if record is None else record.surface
+    return None if surface is None or surface.free_rebuild_ready else (surface.free_progress or (0.0, "waiting"))
+
+
+def finish_preparing(obj):
+    """Wait until what :func:`preparing` reports is done (or make it now when nothing is making
+    it): the next full-detail rebuild then starts at once."""
+    stored.open_binding(_bound(obj)).surface.prepare_free_rebuild(background=False, float32=True)
 
 
 def _prepare_after_change(obj):

@@ -625,3 +625,53 @@ def test_bound_disagreement_of_case_two_and_loose_vertices_alone_is_that_of_ever
     every = np.zeros(normals.shape[0], dtype=bool)
     every[skin.vertex[dots < 0.0]] = True
     assert every.any() and np.array_equal(bound_disagreement(skin, normals, sds.proxy_vertices, sds.proxy_faces), every)
+
+
+def test_a_layouts_band_rows_equal_the_whole_layouts_rows_bit_for_bit(bundled):
+    """A layout's prepared rows (layout_band: outside the selections, within the diffusion's
+    reach of a held vertex) are the rows the whole layout's diffusion gives them, bit for bit,
+    and no other row the whole layout changes is left out; the selections' own rows are not made
+    (their handles place them)."""
+    from bench.scenario import bend_scenario
+    points, tris = bundled("armadillo")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=600)
+    rig = bend_scenario(points).held_rig(sds)
+    extra = np.flatnonzero(np.abs(points[:, 1] - np.median(points[:, 1])) < 0.02 * diagonal(points))
+    for held in (rig["layout"].held, rig["layout"].held + [(2, extra)]):
+        groups = rig["groups"].copy()
+        if len(held) > 2:
+            from skin_detach_addon.core.held_detail import held_proxy_vertices
+            groups[held_proxy_vertices(sds, extra)] = 2
+        seams = sds._seam_weights()
+        labels = sds._held_labels(held)
+        rows, parts = seams.layout_band(groups, labels)
+        keep, replacement = seams.held_by(groups, labels)
+        whole_rows, whole = seams.layout_associations(keep, replacement)
+        placed = labels >= 0
+        assert rows.size and not placed[rows].any()
+        assert np.array_equal(rows, whole_rows[~placed[whole_rows]])
+        mine = ~placed[whole[0]]
+        for got, want in zip(parts, whole):
+            assert np.array_equal(got, want[mine])
+
+
+def test_a_large_meshs_free_rebuild_made_in_the_background_rebuilds_the_same(bundled, monkeypatch):
+    """A mesh above BACKGROUND_ABOVE makes its free rebuild on a background thread after the
+    build: its progress is reported until it is done, whatever needs it waits for it, and the
+    rebuild equals the one made in the build bit for bit (free and with a layout)."""
+    from skin_detach_addon.core import surface as surface_module
+    points, tris = bundled("spot")
+    made = SkinDetachedSurface.build(points, tris, target_faces=300)
+    monkeypatch.setattr(surface_module, "BACKGROUND_ABOVE", 0)
+    background = SkinDetachedSurface.build(points, tris, target_faces=300)
+    job = background._free_job
+    assert job is not None
+    bent = made.proxy_vertices + 0.02 * diagonal(points) * np.sin(3 * made.proxy_vertices)
+    groups = np.full(made.proxy_vertices.shape[0], -1)
+    groups[:5] = 0
+    assert np.array_equal(background.reconstruct(bent, groups=groups), made.reconstruct(bent, groups=groups))
+    job.join()
+    assert background.free_rebuild_ready and background.free_progress is None
+    assert np.array_equal(background.reconstruct(bent), made.reconstruct(bent))
+    out = np.empty((made.n_detail, 3), dtype=np.float32)
+    assert np.array_equal(background.reconstruct(bent, out=out.copy()), made.reconstruct(bent, out=out))

@@ -137,35 +137,52 @@ class LayoutRebuild:
     """The rebuild of one layout of held vertices: the free rebuild (every detail row, the free
     diffusion's; one for all layouts) with the rows the layout changes rebuilt by its own matrices.
 
-    free    :class:`Rebuild` of the n detail rows
+    free_of :class:`Rebuild` of the n detail rows, from ``free_of()`` (waiting for it while a
+            background job makes it); ``free_of(wait=False)`` gives None until it is made
     rows    (r,) int64 sorted detail rows the layout changes that no group holds (within the
             diffusion's reach of a held vertex)
     own     :class:`Rebuild` of those r rows
     held    (h,) int64 sorted detail rows the layout's groups hold (their selections)
-    own_held :class:`Rebuild` of those h rows
+    held_rebuild  a callable giving (rows (h',) of ``held`` the layout changes, their
+            :class:`Rebuild`), called once, when a rebuild is asked for without ``place``
 
     ``__call__(points (m, 3), out=None, place=None)`` returns (n, 3) as :class:`Rebuild` does;
     the rows the layout changes are those its own matrices give, the others the free rebuild's,
     bit for bit. ``place``, a callable writing the held rows into ``out`` (a caller that puts them
     where their handles' motions say), replaces the held rows' product. Preparing a layout makes
-    only ``own`` and ``own_held``: its cost follows the held vertices, not the mesh.
+    only ``own``: its cost follows the border of the held vertices, not the mesh nor the selections.
     """
 
-    def __init__(self, free, rows, own, held, own_held):
-        self.free = free
+    def __init__(self, free_of, rows, own, held, held_rebuild):
+        self._free_of = free_of
         self.rows, self.own = rows, own
-        self.held, self.own_held = held, own_held
-        self.n_detail = free.n_detail
-        self.nnz = free.nnz + own.nnz + own_held.nnz
+        self.held = held
+        self._held_rebuild = held_rebuild
+        self._own_held = None
+
+    @property
+    def free(self):
+        """The free :class:`Rebuild` (waits while a background job makes it)."""
+        return self._free_of()
+
+    @property
+    def nnz(self):
+        """Entries of the matrices made so far."""
+        free = self._free_of(wait=False)
+        return (0 if free is None else free.nnz) + self.own.nnz + (0 if self._own_held is None else self._own_held[1].nnz)
 
     def float32_blocks(self):
-        """The rebuilds' float32 copies (see :meth:`Rebuild.float32_blocks`)."""
-        return self.free.float32_blocks(), self.own.float32_blocks(), self.own_held.float32_blocks()
+        """The float32 copies (see :meth:`Rebuild.float32_blocks`) of the layout's own rows and of
+        the free rebuild once it is made (a background job makes its own; the held rows' once they
+        were asked for)."""
+        free = self._free_of(wait=False)
+        return (None if free is None else free.float32_blocks()), self.own.float32_blocks()
 
     @property
     def float32_ready(self):
-        """Whether every float32 copy is made."""
-        return self.free.float32_ready and self.own.float32_ready and self.own_held.float32_ready
+        """Whether every float32 copy made so far is made."""
+        free = self._free_of(wait=False)
+        return (free is None or free.float32_ready) and self.own.float32_ready
 
     def __call__(self, points, out=None, place=None):
         out = self.free(points, out=out)
@@ -174,5 +191,9 @@ class LayoutRebuild:
         if place is not None:
             place(out)
         elif self.held.size:
-            out[self.held] = self.own_held(points, out=np.empty((self.held.size, 3), dtype=out.dtype))
+            if self._own_held is None:
+                self._own_held = self._held_rebuild()
+            rows, own_held = self._own_held
+            if rows.size:
+                out[rows] = own_held(points, out=np.empty((rows.size, 3), dtype=out.dtype))
         return out

@@ -122,10 +122,10 @@ class SeamWeights:
         self._u = skin.case.shape[0]
         self._frames = frames
         self._ring = one_ring(graph)
+        self._widest = None
         self._free = None
         #: The associations of the islands of recent layouts (:meth:`layout_associations`).
         self._islands = OrderedDict()
-        self._by_face = None
 
     def _rest_of(self, rows):
         """(r, 3) where the skin as bound rebuilds the welded ``rows`` (r,) at rest: their own
@@ -162,9 +162,10 @@ class SeamWeights:
             near[front] = True
         return near
 
-    def _diffused(self, rows, keep, held_rows=None):
+    def _diffused(self, rows, keep, held_rows=None, progress=None):
         """(len(rows), k) CSR: W diffused over the sub-mesh of ``rows`` (sorted ids) with the
-        ``keep`` (len(rows),) rows held at their own weights or at ``held_rows`` (u, k)."""
+        ``keep`` (len(rows),) rows held at their own weights or at ``held_rows`` (u, k);
+        ``progress(fraction)`` after each step."""
         u = self._u
         base = self._base_of(rows)
         if rows.size < u:
@@ -191,11 +192,13 @@ class SeamWeights:
         # let go (one copy of the weights less at once).
         weights = base
         del base  # the first step's input goes with it
-        for _ in range(self.steps):
+        for step in range(self.steps):
             parts = map_blocks(lambda block, right=weights: block @ right, blocks)
             weights = None
             weights = hold(_stacked(parts))
             del parts
+            if progress is not None:
+                progress((step + 1) / self.steps)
         return sp.csr_matrix(weights)
 
     def _associations(self, rows, weights):
@@ -242,11 +245,19 @@ class SeamWeights:
         usable &= weight >= self.threshold * np.repeat(largest, np.diff(indptr[a:b + 1]))
         return usable
 
-    def _free_associations(self):
+    def _free_associations(self, progress=None):
+        """The associations of the free diffusion, every row (made once; ``progress(fraction)``
+        is called after each step of the diffusion)."""
         if self._free is None:
             u = self._u
-            self._free = self._associations(np.arange(u), self._diffused(np.arange(u), np.zeros(u, dtype=bool)))
+            weights = self._diffused(np.arange(u), np.zeros(u, dtype=bool), progress=progress)
+            self._free = self._associations(np.arange(u), weights)
         return self._free
+
+    def _no_associations(self):
+        """Empty (vertex, face, weight, bary, height) arrays of the associations' types."""
+        index = np.int32 if self._u < 2**31 else np.int64
+        return (np.zeros(0, dtype=index), np.zeros(0, dtype=index), np.zeros(0), np.zeros((0, 3)), np.zeros(0))
 
     def kept(self, groups):
         """(u,) bool: every proxy corner the vertex is bound to lies in one rigid group (``groups``
@@ -257,37 +268,43 @@ class SeamWeights:
         """(u,) int64: the rigid group (``groups`` (m,) labels) holding every proxy corner the vertex
         is bound to, -1 where its corners lie in no group or in several (or ``groups`` is None).
         Only the vertices with an association on a face whose corners one group holds are looked
-        at (:meth:`_face_rows`): work in proportion to the groups' reach, not the mesh."""
-        u = self._u
-        carried = np.full(u, -1, dtype=np.int64)
+        at (:meth:`_on_whole_faces`)."""
+        carried = np.full(self._u, -1, dtype=np.int64)
         if groups is None:
             return carried
         groups = np.asarray(groups)
+        candidates = np.flatnonzero(self._on_whole_faces(groups))
+        carried[candidates] = self._carriers(groups, candidates)
+        return carried
+
+    def _on_whole_faces(self, groups):
+        """(u,) bool: the vertices with an association on a proxy face whose three corners one
+        group of ``groups`` (m,) holds (one pass over the associations, no sort)."""
         corner_groups = groups[self._frames.triangles]
         whole = np.flatnonzero((corner_groups[:, 0] >= 0) & (corner_groups == corner_groups[:, :1]).all(axis=1))
-        if not whole.size:
-            return carried
-        order, starts = self._face_rows()
-        candidates = np.unique(self._skin.vertex[order[flat_ranges(starts[whole], starts[whole + 1])[0]]])
+        marked = np.zeros(self._u, dtype=bool)
+        if whole.size:
+            on_whole = np.zeros(corner_groups.shape[0], dtype=bool)
+            on_whole[whole] = True
+            marked[self._skin.vertex[on_whole[self._skin.face]]] = True
+        return marked
+
+    def _carriers(self, groups, vertices):
+        """(s,) int64: :meth:`carrier_group` of the welded ``vertices`` (s,) sorted ids only."""
         vertex = self._skin.vertex
-        first, last = np.searchsorted(vertex, candidates), np.searchsorted(vertex, candidates, side="right")
+        first, last = np.searchsorted(vertex, vertices), np.searchsorted(vertex, vertices, side="right")
+        carried = np.full(vertices.size, -1, dtype=np.int64)
+        bound = last > first
+        first, last = first[bound], last[bound]
+        if not first.size:
+            return carried
         rows = flat_ranges(first, last)[0]
         labels = groups[self._frames.triangles[self._skin.face[rows]]]
         begins = np.cumsum(last - first) - (last - first)  # the skin's rows are grouped by vertex
         low = np.minimum.reduceat(labels.min(axis=1), begins)
         same = (low == np.maximum.reduceat(labels.max(axis=1), begins)) & (low >= 0)
-        carried[candidates[same]] = low[same]
+        carried[np.flatnonzero(bound)[same]] = low[same]
         return carried
-
-    def _face_rows(self):
-        """(order (a,) int32 the skin's association rows sorted by face, starts (k + 1,) where each
-        face's rows begin in it): made once."""
-        if self._by_face is None:
-            face = self._skin.face
-            order = np.argsort(face, kind="stable").astype(np.int32 if face.size < 2**31 else np.int64)
-            starts = np.searchsorted(face[order], np.arange(self._frames.triangles.shape[0] + 1))
-            self._by_face = (order, starts)
-        return self._by_face
 
     def held_by(self, groups, labels=None):
         """(keep (u,) bool, rows (u, k) CSR or None) for :meth:`skin` (a non-empty row of ``rows``
@@ -316,22 +333,98 @@ class SeamWeights:
         by its rows, held vertices and held rows: a layout that adds a handle diffuses the new
         handle's island (and those its change reaches), not every other handle's again."""
         if not keep.any():
-            return np.zeros(0, dtype=np.int64), tuple(part[:0] for part in self._free_associations())
+            return np.zeros(0, dtype=np.int64), self._no_associations()
         ids = np.flatnonzero(self._within(keep, max(self.steps, 1)))
-        count, label = connected_components(self._ring[ids][:, ids], directed=False)
+        return ids, self._islands_of(ids, keep, held_rows)
+
+    def layout_band(self, groups, labels):
+        """(rows (a,) int64 sorted welded ids, their associations (vertex, face, weight, bary,
+        height) grouped by vertex): the rows of the layout's diffused skin (:meth:`skin` with
+        :meth:`held_by` ``(groups, labels)``) that differ from the free diffusion's, except the
+        rows of the vertices ``labels`` (u,) gives a group (>= 0): their handles place them
+        (:class:`.held_detail.HeldPlacement`), their rows are never rebuilt. Those are the
+        rows within ``steps`` rings of a held vertex: outside a selection, a band along its
+        border and around the vertices one group carries (each row the same bit for bit as
+        :meth:`layout_associations` gives it). Its cost follows the band, not the selection: only
+        the selection's border is walked, only the held vertices within the band's reach get
+        their own rows, and each island of the band is diffused on its own and kept."""
+        placed = labels >= 0
+        carried_free = np.zeros(self._u, dtype=bool)
+        candidates = np.flatnonzero(self._on_whole_faces(np.asarray(groups)) & ~placed)
+        carried_free[candidates[self._carriers(groups, candidates) >= 0]] = True
+        seeds = carried_free.copy()
+        seeds[self._border(placed)] = True
+        near = self._within(seeds, max(self.steps, 1))
+        near &= ~placed
+        ids = np.flatnonzero(near)
+        if not ids.size:
+            return ids, self._no_associations()
+        region = np.flatnonzero(self._within(near, self.steps))
+        inside = region[placed[region]]
+        keep = carried_free
+        own = self._carriers(groups, inside) == labels[inside]
+        keep[inside[own]] = True
+        elsewhere = np.full(self._u, -1, dtype=np.int64)
+        elsewhere[inside[~own]] = labels[inside[~own]]
+        rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest_of,
+                         np.asarray(groups), elsewhere)
+        keep |= np.diff(rows.indptr) > 0
+        return ids, self._islands_of(ids, keep, rows)
+
+    def _islands_of(self, ids, keep, held_rows):
+        """The associations of the rows ``ids`` (sorted welded ids) of a layout, island by island
+        (the connected parts of those rows, see :meth:`layout_associations`), grouped by vertex."""
+        local = np.full(self._u, -1, dtype=np.int64)
+        local[ids] = np.arange(ids.size)
+        rows = self._ring[ids]
+        columns = local[rows.indices]
+        inside = columns >= 0
+        owner = np.repeat(np.arange(ids.size), np.diff(rows.indptr))[inside]
+        count, label = connected_components(sp.csr_matrix((np.ones(owner.size, dtype=np.int8), (owner, columns[inside])),
+                                                          shape=(ids.size, ids.size)), directed=False)
         order = np.argsort(label, kind="stable")
         bounds = np.concatenate([[0], np.cumsum(np.bincount(label, minlength=count))])
         islands = [ids[order[a:b]] for a, b in zip(bounds[:-1], bounds[1:])]  # each sorted (ids are)
         parts = [self._island(island, keep, held_rows) for island in islands]
         vertex = np.concatenate([part[0] for part in parts])
         sort = np.argsort(vertex, kind="stable")  # islands interleave in vertex order; each grouped already
-        return ids, tuple(np.concatenate([part[i] for part in parts])[sort] for i in range(5))
+        return tuple(np.concatenate([part[i] for part in parts])[sort] for i in range(5))
+
+    def _border(self, marked):
+        """(b,) int64 sorted welded ids of the ``marked`` (u,) vertices with an unmarked one-ring
+        neighbour (one gather over the marked vertices' rings, no sort)."""
+        if not marked.any():
+            return np.zeros(0, dtype=np.int64)
+        # One int8 product with the one-ring (its entries are int8 ones): each vertex's count of
+        # unmarked neighbours, row blocks side by side; no index array as long as the rings.
+        unmarked = ~marked
+        # int8 counts while no ring has 128 vertices (a fan's pole may: int32 then, its data copied)
+        unmarked = unmarked.view(np.int8) if self._widest_ring() < 128 else unmarked.astype(np.int32)
+        u = self._u
+        bounds = np.linspace(0, u, (threads.WORKERS if u >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
+        ring = self._ring
+        counts = np.concatenate(map_blocks(
+            lambda span: sp.csr_matrix((ring.data[ring.indptr[span[0]]:ring.indptr[span[1]]],
+                                        ring.indices[ring.indptr[span[0]]:ring.indptr[span[1]]],
+                                        ring.indptr[span[0]:span[1] + 1] - ring.indptr[span[0]]),
+                                       shape=(span[1] - span[0], u)) @ unmarked,
+            list(zip(bounds[:-1], bounds[1:]))))
+        return np.flatnonzero(marked & (counts > 0))
+
+    def _widest_ring(self):
+        """The most vertices in one one-ring (made once)."""
+        if self._widest is None:
+            self._widest = int(np.diff(self._ring.indptr).max(initial=0))
+        return self._widest
 
     def _island(self, island, keep, held_rows):
         """The associations of the rows ``island`` (sorted welded ids) of a layout (see
         :meth:`layout_associations`), from the kept islands or made and kept (the last
         :data:`KEPT_ISLANDS`)."""
-        held = island[keep[island]]
+        chosen = np.zeros(self._u, dtype=bool)
+        chosen[island] = True
+        region = np.flatnonzero(self._within(chosen, self.steps))
+        held = region[keep[region]]
         digest = hashlib.blake2b(island.tobytes(), digest_size=20)
         digest.update(held.tobytes())
         if held_rows is not None:
@@ -342,9 +435,6 @@ class SeamWeights:
         if key in self._islands:
             self._islands.move_to_end(key)
             return self._islands[key]
-        chosen = np.zeros(self._u, dtype=bool)
-        chosen[island] = True
-        region = np.flatnonzero(self._within(chosen, self.steps))
         local = self._associations(region, self._diffused(region, keep[region], held_rows))
         inside = chosen[local[0]]
         made = tuple(part[inside] for part in local)
@@ -353,13 +443,14 @@ class SeamWeights:
             self._islands.popitem(last=False)
         return made
 
-    def skin(self, keep=None, held_rows=None):
+    def skin(self, keep=None, held_rows=None, progress=None):
         """The diffused :class:`.skin.Skin` with the ``keep`` (u,) rows held (None: none), at their
         own weights or, where ``held_rows`` (u, k) CSR has a non-empty row, at that row (a vertex
-        held by a handle whose proxy corners are not all held is bound to faces that are)."""
+        held by a handle whose proxy corners are not all held is bound to faces that are);
+        ``progress(fraction)`` as the free diffusion goes."""
         if self.steps <= 0 and held_rows is None:
             return self._skin
-        parts = self._free_associations()
+        parts = self._free_associations(progress)
         if keep is not None and keep.any():
             affected = self._within(keep, max(self.steps, 1))
             region = np.flatnonzero(self._within(affected, self.steps))

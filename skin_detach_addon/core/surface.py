@@ -6,6 +6,7 @@
 
 import hashlib
 import json
+import threading
 import time
 from collections import OrderedDict
 
@@ -16,6 +17,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .clustering import cluster_mesh
+from . import threads
 from .errors import SkinDetachError
 from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
 from .held_detail import layout_of, owned_pairs
@@ -36,6 +38,12 @@ NORMAL_TEST_OVERSAMPLE = 1.5
 #: ... and 1.25 times when it simplifies a clustered copy: measured on the armadillo at 800K, the
 #: test then stops at 1,036 faces for 1,000 (1,204 from 1.5) with fewer disagreeing normals.
 CLUSTERED_OVERSAMPLE = 1.25
+
+#: Detail meshes of at least this many welded vertices make their free rebuild (the skin
+#: diffused over every vertex, its matrix: a third of the build at 10M) on a background thread
+#: after the build (:meth:`SkinDetachedSurface.prepare_free_rebuild`): the build returns, a drag
+#: that shows the preview and Add Handle do not need it, a full-detail rebuild waits for it.
+BACKGROUND_ABOVE = 1_000_000
 
 #: Selections whose drop rows are kept (:meth:`SkinDetachedSurface.drop_rows`): a rig of a few
 #: dozen handles, its last layouts' selections shared.
@@ -85,12 +93,17 @@ class Preview:
         (n,): the detail's welded ids) or, for a selection with no representative (a few vertices;
         a file without representatives), the preview vertex nearest each of its vertices at rest
         (``rest`` (n, 3)); a later pair wins a preview vertex two pairs claim."""
-        pairs, tree = [], None
+        pairs, tree, chosen = [], None, None
         for label, ids in held:
             ids = np.asarray(ids, dtype=np.int64)
             mine = np.zeros(0, dtype=np.int64)
             if self.representatives is not None and ids.size:
-                mine = np.flatnonzero(np.isin(self.representatives, weld[ids]))
+                if chosen is None:
+                    chosen = np.zeros(int(max(weld.max(), self.representatives.max())) + 1, dtype=bool)
+                welded = weld[ids]
+                chosen[welded] = True  # a scatter: np.isin would sort the whole selection
+                mine = np.flatnonzero(chosen[self.representatives])
+                chosen[welded] = False
             if not mine.size and ids.size:
                 tree = tree if tree is not None else cKDTree(self.points)
                 mine = np.unique(tree.query(np.asarray(rest[ids], dtype=np.float64))[1])
@@ -165,6 +178,13 @@ class SkinDetachedSurface:
         #: Drop rows of recent selections (:meth:`_drop_rows_of`).
         self._drops = OrderedDict()
         self._corner_weights = None
+        #: The diffused skin is made once, the free rebuild once, whichever thread asks first
+        #: (a background job may be making it: :meth:`prepare_free_rebuild`).
+        self._seams_lock = threading.Lock()
+        self._free_lock = threading.Lock()
+        self._free_job = None
+        #: (fraction done, stage) of the free rebuild while it is being made, else None.
+        self.free_progress = None
 
     @property
     def seam_steps(self):
@@ -196,13 +216,14 @@ class SkinDetachedSurface:
         if self.triangles is None:
             raise SkinDetachError("triangles: expected the detail triangles (attach_topology) before a rebuild, got "
                                   "none; pass the mesh's triangles to attach_topology")
-        if self._seams is None:
-            u = self.skin.case.shape[0]
-            frames = ProxyFrames(self.proxy_vertices, self.proxy_faces)
-            edges = self._edges if self._edges is not None else half_edge_graph(self.weld[self.triangles], u)
-            self._seams = SeamWeights(self.skin, edges, frames, self._seam_steps)
-            self._edges = None
-        return self._seams
+        with self._seams_lock:
+            if self._seams is None:
+                u = self.skin.case.shape[0]
+                frames = ProxyFrames(self.proxy_vertices, self.proxy_faces)
+                edges = self._edges if self._edges is not None else half_edge_graph(self.weld[self.triangles], u)
+                self._seams = SeamWeights(self.skin, edges, frames, self._seam_steps)
+                self._edges = None
+            return self._seams
 
     def _held_labels(self, held):
         """(u,) group of each welded detail vertex from ``held`` (pairs (group label, detail ids)),
@@ -213,34 +234,99 @@ class SkinDetachedSurface:
                 labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
         return labels
 
-    def _free_rebuild(self):
+    def _free_rebuild(self, wait=True, float32=False):
         """The :class:`.reconstruction.Rebuild` of the free diffused skin, every detail row: what
-        every layout's rebuild shares (made once; :meth:`build` makes the diffusion itself)."""
-        if None not in self._rebuilds:
-            skin = self._seam_weights().skin()
-            check_coefficients(skin, "the diffused skin")
-            self._rebuilds[None] = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
-        return self._rebuilds[None]
+        every layout's rebuild shares (made once, by whichever thread asks first; :meth:`build`
+        makes it or starts its background job). ``wait=False``: None unless it is made;
+        ``float32``: its float32 copy made too."""
+        if not wait:
+            return self._rebuilds.get(None)
+        with self._free_lock:
+            if None not in self._rebuilds:
+                self.free_progress = (0.0, "diffusing the skin")
+                try:
+                    skin = self._seam_weights().skin(progress=self._free_progressed)
+                    check_coefficients(skin, "the diffused skin")
+                    self.free_progress = (0.9, "making the rebuild")
+                    rebuild = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
+                    del skin
+                    if float32:
+                        rebuild.float32_blocks()
+                    self._rebuilds[None] = rebuild
+                finally:
+                    self.free_progress = None
+            return self._rebuilds[None]
+
+    def _free_progressed(self, fraction):
+        self.free_progress = (0.7 * fraction, "diffusing the skin")
+
+    def prepare_free_rebuild(self, background=None, float32=False):
+        """Make the free rebuild (see :meth:`_free_rebuild`) now, or with ``background`` (None: for
+        meshes of :data:`BACKGROUND_ABOVE` welded vertices or more) on a background thread whose
+        work runs on one core (:func:`.threads.start_background`); :attr:`free_progress` says how
+        far it got, :attr:`free_rebuild_ready` when it is done, and whatever needs it meanwhile
+        waits for it (a failure there is raised again by the next call that needs it)."""
+        if background is None:
+            background = self.skin.case.shape[0] >= BACKGROUND_ABOVE and None not in self._rebuilds
+        if not background:  # waits for a running job, if any
+            rebuild = self._free_rebuild(float32=float32)
+            if float32:
+                rebuild.float32_blocks()
+            return
+        if None in self._rebuilds or (self._free_job is not None and self._free_job.is_alive()):
+            return
+
+        def job():
+            try:
+                self._free_rebuild(float32=float32)
+            except Exception:  # noqa: BLE001 (made again, and raised, where it is needed)
+                pass
+
+        self.free_progress = (0.0, "diffusing the skin")
+        self._free_job = threads.start_background(job, "skin_detach_free_rebuild")
+
+    @property
+    def free_rebuild_ready(self):
+        """Whether the free rebuild is made (a full-detail rebuild then starts at once)."""
+        return None in self._rebuilds
 
     def _layout_rebuild(self, groups, held):
         """The :class:`.reconstruction.LayoutRebuild` of a layout: the free rebuild with the rows
-        within the diffusion's reach of its held vertices rebuilt from their own associations."""
+        within the diffusion's reach of its held vertices rebuilt from their own associations.
+        The held rows themselves (``held``'s detail: their handles place them) are rebuilt only
+        when a caller asks for them (:meth:`_held_rebuild`): preparing a layout costs the band
+        along its selections' borders (:meth:`.seam_weights.SeamWeights.layout_band`), not the
+        selections (at 3.2M the bend's anchor and handle hold 640,000 vertices)."""
         seams = self._seam_weights()
-        keep, rows = seams.held_by(groups, None if held is None else self._held_labels(held))
-        welded, parts = seams.layout_associations(keep, rows)
+        labels = self._held_labels(held or [])
+        welded, parts = seams.layout_band(groups, labels)
+        changed = np.zeros(self.skin.case.shape[0], dtype=bool)
+        changed[welded] = True
+        rows = np.flatnonzero(changed[self.weld])
+        placed = np.flatnonzero((labels >= 0)[self.weld])
+        return LayoutRebuild(self._free_rebuild, rows, self._own_rebuild(parts, rows),
+                             placed, lambda: self._held_rebuild(groups, held, placed))
+
+    def _own_rebuild(self, parts, rows):
+        """The :class:`.reconstruction.Rebuild` of the detail ``rows`` (r,) from the associations
+        ``parts`` (vertex, face, weight, bary, height) of their welded rows."""
         vertex, face, weight, bary, height = parts
         skin = Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=self.skin.case)
         check_coefficients(skin, "the diffused skin")
+        return Rebuild(skin, self.weld[rows], self.proxy_vertices, self.proxy_faces)
+
+    def _held_rebuild(self, groups, held, rows):
+        """(rows (h',), their :class:`.reconstruction.Rebuild`): the held detail ``rows`` (h,) of a
+        layout whose rows the layout's diffused skin changes (the others keep the free rebuild's),
+        what a rebuild without their handles' placement gives them (made when first asked for: it
+        costs the selections, not their border)."""
+        seams = self._seam_weights()
+        keep, replacement = seams.held_by(groups, self._held_labels(held))
+        welded, parts = seams.layout_associations(keep, replacement)
         changed = np.zeros(self.skin.case.shape[0], dtype=bool)
         changed[welded] = True
-        changed_rows = changed[self.weld]
-        placed = np.zeros(self.n_detail, dtype=bool)
-        for _, ids in held or []:
-            placed[np.asarray(ids, dtype=np.int64)] = True
-        rows, held_rows = np.flatnonzero(changed_rows & ~placed), np.flatnonzero(changed_rows & placed)
-        return LayoutRebuild(self._free_rebuild(),
-                             rows, Rebuild(skin, self.weld[rows], self.proxy_vertices, self.proxy_faces),
-                             held_rows, Rebuild(skin, self.weld[held_rows], self.proxy_vertices, self.proxy_faces))
+        rows = rows[changed[self.weld[rows]]]  # the others' rows are the free rebuild's
+        return rows, self._own_rebuild(parts, rows)
 
     def _rebuild_for(self, groups, held=None):
         """The rebuild with the vertices carried by one rigid group held (``groups`` (m,) int64 or
@@ -414,11 +500,13 @@ class SkinDetachedSurface:
         surface.attach_topology(triangles, edges)  # the caller's array (validated again, not kept twice)
         del edges  # the seams drop it once made
         # The skin diffused over the whole detail mesh and its rebuild, once: every layout's rebuild
-        # is this one with the rows near its held vertices replaced.
-        surface._free_rebuild()
+        # is this one with the rows near its held vertices replaced (a large mesh's on a background
+        # thread: the preview stands in for it until a full-detail rebuild).
         if preview is not None:  # the drag shows the preview: its free rebuild too, not in the first Add Handle
-            preview.surface._free_rebuild()
+            preview.surface.prepare_free_rebuild(background=False)
+        surface.prepare_free_rebuild(float32=True)
         surface.preview = preview
+        surface.corner_weights()  # every Add Handle reads it (0.2 s at 3.2M)
         done = time.perf_counter()
         stats["seconds"] = {
             "prepare": prepared - start, "cluster": clustering - prepared, "simplify": simplified - clustering, "normal_test": tested - simplified,

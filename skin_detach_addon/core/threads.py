@@ -2,6 +2,7 @@
 blocks and vertex chunks run side by side on the machine's cores."""
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 #: Threads used (at most four: the work is memory-bound beyond that).
@@ -10,6 +11,11 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: release the GIL): the rebuild's, the diffusion's.
 PARALLEL_MIN_ROWS = 100_000
 _POOL = None
+#: Per thread: whether :func:`map_blocks` runs its blocks one after the other (a background job's
+#: thread: it keeps to one core and never queues the pool behind the artist's work).
+_LOCAL = threading.local()
+#: Background jobs started (:func:`start_background`), waited for by :func:`shutdown`.
+_JOBS = []
 
 
 def pool():
@@ -21,15 +27,33 @@ def pool():
 
 
 def shutdown():
-    """Stop the pool's threads (after the work given to them); the next :func:`pool` makes a new one."""
+    """Wait for the background jobs (:func:`start_background`) and stop the pool's threads (after
+    the work given to them); the next :func:`pool` makes a new one."""
     global _POOL
+    while _JOBS:
+        _JOBS.pop().join()
     if _POOL is not None:
         _POOL.shutdown(wait=True)
         _POOL = None
 
 
+def start_background(function, name):
+    """Run ``function()`` on a new daemon thread named ``name`` whose :func:`map_blocks` calls run
+    in that thread alone; returns the thread."""
+    def run():
+        _LOCAL.serial = True
+        function()
+
+    thread = threading.Thread(target=run, name=name, daemon=True)
+    _JOBS[:] = [job for job in _JOBS if job.is_alive()]
+    _JOBS.append(thread)
+    thread.start()
+    return thread
+
+
 def map_blocks(function, blocks):
-    """``[function(block) for block in blocks]``, run on the pool when there is more than one."""
-    if len(blocks) <= 1 or WORKERS == 1:
+    """``[function(block) for block in blocks]``, run on the pool when there is more than one
+    (one after the other on a background job's thread, see :func:`start_background`)."""
+    if len(blocks) <= 1 or WORKERS == 1 or getattr(_LOCAL, "serial", False):
         return [function(block) for block in blocks]
     return [done.result() for done in [pool().submit(function, block) for block in blocks]]

@@ -20,6 +20,21 @@ def wrapped_label(layout, text, icon='NONE'):
         layout.label(text=line, icon=icon if k == 0 else 'BLANK1')
 
 
+#: Seconds between redraws of the sidebar while a bound mesh is being prepared (its progress).
+REDRAW_SECONDS = 0.5
+
+
+def _redraw_while_preparing():
+    """Redraw every 3D View's sidebar while a bound mesh is being prepared (:func:`api.preparing`);
+    the timer's body: the interval to the next call, or None once nothing is."""
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+    busy = any(api.preparing(obj) is not None for obj in api.bound_objects(bpy.data.objects))
+    return REDRAW_SECONDS if busy else None
+
+
 class VIEW3D_PT_skin_detach(bpy.types.Panel):
     bl_space_type = 'VIEW_3D'
     bl_region_type = 'UI'
@@ -44,6 +59,11 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         if not bound:
             wrapped_label(layout, f"{obj.name}: not bound", icon='INFO')
             return
+        progress = api.preparing(obj)
+        if progress is not None:  # a large mesh's full-detail rebuild, made beside the artist's work
+            wrapped_label(layout, f"Preparing the full detail ({progress[1]}): {100 * progress[0]:.0f} %", icon='TIME')
+            if not bpy.app.timers.is_registered(_redraw_while_preparing):
+                bpy.app.timers.register(_redraw_while_preparing, first_interval=REDRAW_SECONDS)
 
         box = layout.box()
         box.label(text="Handles", icon='EMPTY_AXIS')
