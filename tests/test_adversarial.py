@@ -61,10 +61,10 @@ def test_a_handle_moved_absurdly_far_writes_nothing(rigged):
 @pytest.mark.parametrize("field, value", [("skin_weight", np.nan), ("skin_height", np.inf), ("skin_bary", 1e300)])
 def test_crafted_skin_coefficients_are_refused(rigged, field, value):
     obj, handle = rigged
-    stored = np.array(obj[binding.KEY][field])
+    stored = np.array(binding.arrays_of(obj)[field])
     stored[0] = value
-    del obj[binding.KEY][field]
-    obj[binding.KEY][field] = stored
+    del binding.arrays_of(obj)[field]
+    binding.arrays_of(obj)[field] = stored
     reload_binding()
     handle.location.x += 0.1
     refused(lambda: api.deform(obj), f"binding of 'spot'.*{field}")
@@ -73,18 +73,18 @@ def test_crafted_skin_coefficients_are_refused(rigged, field, value):
 
 def test_crafted_rest_and_data_of_the_wrong_kind_are_refused(rigged):
     obj, _ = rigged
-    rest = np.array(obj[binding.KEY]["rest"])
+    rest = np.array(binding.arrays_of(obj)["rest"])
     rest[5] = np.nan
-    del obj[binding.KEY]["rest"]
-    obj[binding.KEY]["rest"] = rest
+    del binding.arrays_of(obj)["rest"]
+    binding.arrays_of(obj)["rest"] = rest
     reload_binding()
     refused(lambda: api.reset(obj), "finite stored rest")
-    del obj[binding.KEY]["rest"]
-    obj[binding.KEY]["rest"] = rest[:30]
+    del binding.arrays_of(obj)["rest"]
+    binding.arrays_of(obj)["rest"] = rest[:30]
     reload_binding()
     refused(lambda: api.reset(obj), "stored rest positions")
     obj[binding.KEY]["stats"] = "{not json"
-    obj[binding.KEY]["skin_face"] = np.array([1, 2], dtype=np.int32)
+    binding.arrays_of(obj)["skin_face"] = np.array([1, 2], dtype=np.int32)
     reload_binding()
     refused(lambda: api.deform(obj), "binding of 'spot'")
     assert api.figures(obj)["build"] == {}  # the panel's figures still read

@@ -59,11 +59,27 @@ def test_binding_is_stored_without_int64_or_pickles(scene):
     obj = import_spot()
     rig(obj, axis=1)
     props = obj[binding.KEY]
-    for key, value in props.items():
+    for key, value in list(props.items()) + list(binding.arrays_of(obj).items()):
         if hasattr(value, "typecode"):
             assert value.typecode in "ifd", key
         else:
-            assert isinstance(value, (int, str, float)) or key in ("proxy", "settings"), key
+            assert isinstance(value, (int, str, float)) or key in ("proxy", "settings", binding.STORE), key
+
+
+def test_the_bindings_arrays_live_on_a_text_datablock_that_goes_with_the_binding(scene):
+    """The record on the object keeps no array (Blender copies an object's ID properties into its
+    evaluated copy on every update): its arrays are on a text datablock it points at, which
+    Clear removes with it."""
+    import bpy
+    obj = import_spot()
+    rig(obj, axis=1)
+    side = obj[binding.KEY][binding.STORE]
+    assert side.name.startswith(binding.STORE_PREFIX) and side.users == 1
+    assert max((len(value) for value in obj[binding.KEY].values() if hasattr(value, "typecode")), default=0) <= 16
+    assert binding.arrays_of(obj)["rest"] is not None
+    name = side.name
+    skin_rig.clear(obj)
+    assert name not in bpy.data.texts
 
 
 def test_add_handle_leaves_edit_mode_and_uses_the_edit_selection(scene):

@@ -49,15 +49,39 @@ def group_members(obj, name):
     return np.asarray(members, dtype=np.int64)
 
 
+#: mesh pointer -> (where its corner array is, the counts, a strided sample of it, the digest):
+#: see :func:`mesh_fingerprint`.
+_FINGERPRINTS = {}
+#: Corners sampled to tell that a mesh's corner array is the one last digested.
+FINGERPRINT_SAMPLE = 256
+
+
 def mesh_fingerprint(mesh):
     """Digest of the vertex, face and corner counts and every corner's vertex: changes when the
     topology or the vertex order changes, not when positions do. (Face boundaries are read
     through the counts only: Blender's per-face collection is ten times slower to read than
-    the whole corner array, and this runs on every solve.)"""
-    corners = np.empty(len(mesh.loops), dtype=np.int32)
-    if corners.size:
-        mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
-    return _digest(len(mesh.vertices), np.array([len(mesh.polygons), len(mesh.loops)], dtype=np.int64), corners)
+    the whole corner array, and this runs on every solve.) The digest of a mesh whose corner
+    array is still the one last digested (Blender's memory of it, the counts and a strided sample
+    of its values: an edit in Edit Mode, a sculpt's remesh or a script's new topology gives the
+    mesh a new array) is not made again: at 10M vertices it read 59M corners (0.2-0.7 s) on
+    every step."""
+    counts = (len(mesh.vertices), len(mesh.polygons), len(mesh.loops))
+    if not counts[2]:
+        return _digest(counts[0], np.array(counts[1:], dtype=np.int64), np.empty(0, dtype=np.int32))
+    data = mesh.attributes[".corner_vert"].data
+    where = data[0].as_pointer()
+    picks = np.linspace(0, counts[2] - 1, min(FINGERPRINT_SAMPLE, counts[2])).astype(np.int64)
+    sample = np.array([data[int(k)].value for k in picks], dtype=np.int64)
+    known = _FINGERPRINTS.get(mesh.as_pointer())
+    if known is not None and known[:2] == (where, counts) and np.array_equal(known[2], sample):
+        return known[3]
+    corners = np.empty(counts[2], dtype=np.int32)
+    data.foreach_get("value", corners)
+    digest = _digest(counts[0], np.array(counts[1:], dtype=np.int64), corners)
+    if len(_FINGERPRINTS) > 256:
+        _FINGERPRINTS.clear()
+    _FINGERPRINTS[mesh.as_pointer()] = (where, counts, sample, digest)
+    return digest
 
 
 def positions_digest(positions):

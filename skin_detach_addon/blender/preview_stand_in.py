@@ -16,7 +16,8 @@ def preview_of(obj):
     preview = stored.stored_object(obj, "preview")
     if preview is None or preview.type != 'MESH' or preview.get(stored.PREVIEW_TAG) != obj:
         return None
-    count = obj[stored.KEY].get(stored.PREVIEW_PREFIX + "weld")
+    arrays = stored.arrays_of(obj)
+    count = None if arrays is None else arrays.get(stored.PREVIEW_PREFIX + "weld")
     if count is None or len(preview.data.vertices) != len(count):
         return None
     return preview

@@ -57,8 +57,12 @@ class ProxySolves:
     vertices): a :class:`DualLaplacian` per constraint layout (the last :data:`KEPT_SOLVERS`),
     each with its recent results (newest first, at most two) that a following solve starts from."""
 
-    def __init__(self, surface):
+    def __init__(self, surface, pulls_of=None):
         self.surface = surface
+        #: ``pulls_of(layout)``: the drop-row matrices (s_h, m) of each pair of ``layout.owned``
+        #: (None: the surface's own, :meth:`.surface.SkinDetachedSurface.drop_rows`).
+        self._pulls_of = pulls_of if pulls_of is not None else (
+            lambda layout: surface.drop_rows([detail for _, detail in layout.owned], layout.groups))
         #: (ids bytes, preserve_volume, layout key) -> [DualLaplacian, recent results].
         self._solvers = {}
 
@@ -87,8 +91,7 @@ class ProxySolves:
         if key not in self._solvers:
             if len(self._solvers) >= KEPT_SOLVERS:
                 self._solvers.pop(next(iter(self._solvers)))
-            pulls = [] if layout is None else self.surface.drop_rows([detail for _, detail in layout.owned],
-                                                                     layout.groups)
+            pulls = [] if layout is None else self._pulls_of(layout)
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
                                                 preserve_volume=preserve_volume, pulls=pulls), []]
         return key

@@ -38,8 +38,16 @@ class SkinStretch:
         self._inverse = np.divide(1.0, self._rest, out=np.zeros_like(self._rest), where=self._rest > 0)
         skin = surface.skin
         u = skin.case.shape[0]
-        welded = sp.csr_matrix((skin.weight.astype(np.float32), (skin.vertex, skin.face)), shape=(u, faces.shape[0]))
-        self._weights = sp.csr_matrix(welded[surface.weld])
+        # The skin is grouped by vertex: its rows make the welded matrix as they stand (no sort).
+        counts = np.bincount(skin.vertex, minlength=u)
+        index = np.int32 if skin.vertex.size < 2**31 - 1 else np.int64
+        indptr = np.zeros(u + 1, dtype=index)
+        np.cumsum(counts, out=indptr[1:])
+        welded = sp.csr_matrix((skin.weight.astype(np.float32), skin.face.astype(index), indptr),
+                               shape=(u, faces.shape[0]))
+        weld = surface.weld
+        identity = weld.shape[0] == u and bool((weld == np.arange(u)).all())
+        self._weights = welded if identity else sp.csr_matrix(welded[weld])
 
     def face_stretch(self, points):
         """(k,) the stretch of every proxy face at ``points`` (m, 3)."""
