@@ -63,22 +63,31 @@ def side(row):
 
 def large(rows):
     def each(key, text):
-        return lambda r: ", ".join(number(d[key], text) for d in r["drags"])
+        return lambda r: ", ".join(number(d.get(key), text) for d in r["drags"])
     return ("\n### The modal drag at scale\n\nDragSession as the modal operator drives it (fake top view, 1,000-face "
-            "proxy target), Blender's depsgraph update after every mouse move; three drags, each confirmed: the "
-            "first (after the anchor and handle are added), the same handle again, and a second handle added about "
-            "the middle (Add Handle prepares its layout; then its layout's first confirm). Per drag, in that order: "
-            "the seconds adding its handles, the median move, the confirm and the stretch attribute's share of "
-            "it.\n\n" + table([
+            "proxy target), Blender's depsgraph update after every mouse move. Build is api.build's blocking time; "
+            "ready, from the build's start, when its background job (the full-detail rebuild of meshes of a million "
+            "vertices or more) is done, Add Anchor and Add Handle running beside it. Then three drags, each "
+            "confirmed: the first (the bend's anchor and handle), the same handle again, and a second handle added "
+            "about the middle (Add Handle prepares its layout; then its layout's first confirm). Per drag, in that "
+            "order: the seconds adding its handles, the first and the median move, the moves' 95th percentile, the "
+            "confirm and the stretch attribute's share of it; api.deform after a script moves the last handle."
+            "\n\n" + table([
                 ("vertices", lambda r: f"{r['vertices']:,}"), ("proxy faces", lambda r: f"{r['proxy_faces']:,}"),
                 ("preview vertices", lambda r: f"{r['preview_vertices']:,}"),
                 ("build s", lambda r: f"{r['build_s']:.2f}"),
                 ("build stages s", lambda r: ", ".join(f"{k} {v:.1f}" for k, v in r["build_stages_s"].items())),
                 ("build adds MB to peak", lambda r: f"{r['build_peak_mb_added']:.0f}"),
+                ("ready s", lambda r: number(r.get("ready_s"), "{:.1f}")),
+                ("Add Anchor, Add Handle s", lambda r: ", ".join(number(r.get(k), "{:.2f}")
+                                                                 for k in ("anchor_s", "handle_s"))),
                 (f"handles added s ({DRAGS})", each("handles_s", "{:.2f}")),
+                (f"first move ms ({DRAGS})", each("first_move_ms", "{:.1f}")),
                 (f"move ms median ({DRAGS})", each("move_ms", "{:.1f}")),
+                (f"move ms p95 ({DRAGS})", each("move_p95_ms", "{:.1f}")),
                 (f"confirm s ({DRAGS})", each("confirm_s", "{:.2f}")),
                 ("stretch % of each confirm", each("stretch_pct", "{:.1f}")),
+                ("api.deform s", lambda r: number(r.get("deform_s"), "{:.2f}")),
                 ("drag adds MB to peak", lambda r: f"{r['drag_peak_mb_added']:.0f}"),
                 ("peak MB", lambda r: f"{r['peak_mb']:.0f}")], rows))
 

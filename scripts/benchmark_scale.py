@@ -222,7 +222,7 @@ def side_row(size, steps):
 
 def modal_drag(session, steps):
     """Drive a new DragSession through ``steps`` mouse moves and a confirm, each followed by
-    Blender's depsgraph update: (median move ms, confirm s, stretch s)."""
+    Blender's depsgraph update: (move seconds (steps,), confirm s, stretch s)."""
     import bpy
     times = []
     for k in range(1, steps + 1):
@@ -235,20 +235,26 @@ def modal_drag(session, steps):
         session.event("RET", "PRESS", (10 * steps, 5 * steps))
         bpy.context.view_layer.update()
         confirm = time.perf_counter() - start
-    return median_ms(times), confirm, spent["stretch_s"]
+    return times, confirm, spent["stretch_s"]
 
 
 def large_row(spec, steps):
     """The modal drag at scale, as DragSession drives it (fake top view): build seconds, stages
-    and the peak memory it adds (the Blender mesh itself not counted), and three drags (first drag;
-    the same handle again; a second handle's first drag), each with the seconds adding its handles
-    (each add prepares its layout), its median ms per mouse move and its confirm's seconds with
-    the stretch attribute's share. ``spec`` is a size, or "size@N" to give meshes above N
-    vertices a preview (default: the add-on's Preview Above)."""
+    and the peak memory it adds (the Blender mesh itself not counted), the seconds until its
+    background job (the full-detail free rebuild, :data:`~skin_detach_addon.core.surface.BACKGROUND_ABOVE`)
+    is done, Add Anchor's and Add Handle's seconds (each prepares its layout; the background job
+    runs beside them), then, once the background job is done, three drags (first drag; the same
+    handle again; a second handle's first drag), each with the seconds adding its handle, its
+    first and median move ms, the moves' 95th percentile and its confirm's seconds with the
+    stretch attribute's share, and api.deform's seconds after a script moves the handle. ``spec``
+    is a size, or "size@N" to give meshes above N vertices a preview (default: the add-on's
+    Preview Above)."""
     import bpy
 
+    from bench.scenario import bend_scenario
     from bench.views import TopView
     from skin_detach_addon import api
+    from skin_detach_addon.blender import mesh_io
     size, _, above = spec.partition("@")
     preview_above = int(above) if above else api.PREVIEW_ABOVE
     points, triangles = subdivided("armadillo", SIZES[size])
@@ -256,8 +262,21 @@ def large_row(spec, steps):
     obj = blender_mesh("armadillo", points, triangles)
     del triangles
     bpy.context.view_layer.update()
-    bound, _, handle = bind_bend(obj, 1000, preview_above)
-    stats = bound["stats"]
+    before = peak_mb()
+    start = time.perf_counter()
+    stats = api.build(obj, target_faces=1000, preview_above=preview_above)
+    build_s = time.perf_counter() - start
+    build_peak = peak_mb() - before
+    scenario = bend_scenario(mesh_io.read_positions(obj.data).astype(np.float64))
+    timed = time.perf_counter()
+    api.add_anchor(obj, scenario.anchor_ids)
+    anchor_s = time.perf_counter() - timed
+    timed = time.perf_counter()
+    handle = api.add_handle(obj, scenario.handle_ids)
+    handle_s = time.perf_counter() - timed
+    api.finish_preparing(obj)
+    ready_s = time.perf_counter() - start
+    api.show_stretch(obj)
     coordinate = points[:, np.argmax(points.max(axis=0) - points.min(axis=0))]
     low, high = coordinate.min(), coordinate.max()
     middle = np.flatnonzero(np.abs(coordinate - (low + high) / 2) <= 0.05 * (high - low))  # a band about the middle
@@ -265,18 +284,24 @@ def large_row(spec, steps):
     view = TopView(0.002)
     drags = []
     for name, empty in (("first drag", handle), ("same handle again", handle), ("second handle", None)):
-        added = bound["handles_s"] if name == "first drag" else None
+        added = anchor_s + handle_s if name == "first drag" else None
         if empty is None:
-            start = time.perf_counter()
+            timed = time.perf_counter()
             empty = api.add_handle(obj, middle)
-            added = time.perf_counter() - start
-        move_ms, confirm, stretch = modal_drag(api.DragSession(obj, empty, view, (0, 0), preview_above=preview_above),
-                                               steps)
-        drags.append({"drag": name, "handles_s": added, "move_ms": move_ms, "confirm_s": confirm,
-                      "stretch_s": stretch, "stretch_pct": 100 * stretch / confirm})
-    return {"size": size, "vertices": int(points.shape[0]), "build_s": bound["build_s"],
-            "build_peak_mb_added": bound["build_peak_mb_added"], "preview_vertices": stats.get("preview_vertices", 0),
-            "proxy_faces": stats["proxy_faces"], "build_stages_s": stats["seconds"], "drags": drags,
+            added = time.perf_counter() - timed
+        moves, confirm, stretch = modal_drag(api.DragSession(obj, empty, view, (0, 0), preview_above=preview_above),
+                                             steps)
+        drags.append({"drag": name, "handles_s": added, "first_move_ms": 1000 * moves[0],
+                      "move_ms": median_ms(moves), "move_p95_ms": 1000 * float(np.percentile(moves, 95)),
+                      "confirm_s": confirm, "stretch_s": stretch, "stretch_pct": 100 * stretch / confirm})
+    empty.location.x += 0.01 * float(high - low)
+    timed = time.perf_counter()
+    api.deform(obj)
+    deform_s = time.perf_counter() - timed
+    return {"size": size, "vertices": int(points.shape[0]), "build_s": build_s, "ready_s": ready_s,
+            "build_peak_mb_added": build_peak, "preview_vertices": stats.get("preview_vertices", 0),
+            "proxy_faces": stats["proxy_faces"], "build_stages_s": stats["seconds"], "anchor_s": anchor_s,
+            "handle_s": handle_s, "drags": drags, "deform_s": deform_s,
             "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb()}
 
 
