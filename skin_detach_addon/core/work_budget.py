@@ -27,8 +27,9 @@ from .errors import SkinDetachError
 ITERATION_UNITS = 8
 #: Units a new factor of the Hessian costs (measured 27-35 at 1,000 and 3,000 proxy faces).
 FACTOR_UNITS = 30
-#: CPU measurements a :class:`WorkRate` keeps weighing (each one this much less than the next).
-RATE_DECAY = 0.8
+#: How much each CPU measurement a :class:`WorkRate` keeps weighs less than the next (about the last
+#: ten solves count: a thread clock that ticks coarsely averages out).
+RATE_DECAY = 0.9
 
 
 class WorkBudget:
