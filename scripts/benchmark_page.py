@@ -48,7 +48,8 @@ def drag_section(data):
          else "not settled"),
         ("release pop (diag)", lambda r: f"{r['release_pop']:.1e}"), ("confirm ms", lambda r: f"{r['confirm_ms']:.0f}"),
         ("stack step ms median / p95", lambda r: f"{stack(r, 'step_ms_median')} / {stack(r, 'step_ms_p95')}"),
-        ("our p95 / stack p95", ratio), ("fails", lambda r: (", ".join(r["fails"]) or "none") if "fails" in r else "-"),
+        ("our p95 / stack p95", ratio), ("load (1 min)", lambda r: f"{r['load']:.2f}" if "load" in r else "-"),
+        ("fails", lambda r: (", ".join(r["fails"]) or "none") if "fails" in r else "-"),
     ]
     busy = [
         ("mesh", lambda r: r["mesh"]), ("vertices", lambda r: f"{r['vertices']:,}"),
@@ -79,7 +80,8 @@ def drag_section(data):
             "count + Hook + Laplacian Deform + Surface Deform, stepped through the same turn in the same process (no "
             "ratio where its Laplacian Deform found no solution). Goals: pop <= 2e-3, tracking median <= 5e-3, path "
             "0.8-1.3, confirm <= 150 ms, our p95 <= 1.5x the stack's; rows worst first, each naming the goals it "
-            "fails. horse, ogre and beetle-alt (bench/data) are meshes the drag was not tuned on.\n\n" + heading(data["meta"]) + "\n" +
+            "fails. horse, ogre and beetle-alt (bench/data) are meshes the drag was not tuned on. Load: the "
+            "1-minute load average when the row began (the machine's other work; 2 cores).\n\n" + heading(data["meta"]) + "\n" +
             table(columns, data["rows"]) + busy_part)
 
 
