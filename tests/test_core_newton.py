@@ -316,3 +316,11 @@ def test_a_settle_after_moves_that_needed_many_cg_steps_makes_the_factor_first(s
     first = solver.solve(targets, initial=moved.vertices, max_iter=100, tol=1e-12, budget_units=1, idle=True)
     assert not solver._lagged.at_rest and solver._lagged.steps <= REFRESH_STEPS
     assert first.energy[-1] <= first.energy[0]
+
+
+def test_a_proxy_with_every_vertex_constrained_has_no_work_to_time_and_solves_at_once():
+    from shapes import plane
+    points, tris = plane(4)
+    solver = DualLaplacian(points, tris, np.arange(points.shape[0]))
+    result = solver.solve(points + 1.0, budget_ms=4.0)
+    assert result.converged and np.array_equal(result.vertices, points + 1.0)

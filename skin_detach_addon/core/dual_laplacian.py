@@ -301,8 +301,9 @@ class DualLaplacian:
         self._lagged = LaggedHessian(HessianFactor(self.energy_terms, self.free, m), rest_state,
                                      None if vertex_groups is None else lambda state: state.rotations(vertex_groups))
         #: CPU milliseconds per unit of work (:mod:`.work_budget`): first one unit's, timed here at
-        #: rest (a Hessian product and a preconditioner solve), then every solve's.
-        self.rate = WorkRate(self._time_unit(rest_state, m))
+        #: rest (a Hessian product and a preconditioner solve; nothing to time without a free
+        #: vertex, whose solves do no work), then every solve's.
+        self.rate = WorkRate(self._time_unit(rest_state, m) if self.free.size else 1.0)
         self.energy_terms.reset()
 
     def _time_unit(self, state, m):
