@@ -314,6 +314,26 @@ def test_a_busy_machine_shows_the_same_drag_later_not_another_one(scene, monkeyp
     assert all(np.array_equal(a, b) for a, b in zip(quiet, busy))
 
 
+def test_on_a_machine_fifty_times_slower_the_drag_still_settles_and_confirms_what_it_showed(scene, monkeypatch):
+    import time
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    real = time.thread_time
+    monkeypatch.setattr(time, "thread_time", lambda: 50.0 * real())  # every unit of work costs 50 times the CPU
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("R", "PRESS", (0, 0))
+    for k in range(1, 9):
+        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    for slices in range(1, 400):
+        session.event("TIMER", "NOTHING", (-160, 100))
+        if session.settled:
+            break
+    assert session.settled and slices > 1                    # less per slice, and still settled
+    shown = mesh_io.read_positions(obj.data).copy()
+    assert session.event("LEFTMOUSE", "PRESS", (-160, 100)) == FINISHED
+    assert np.array_equal(mesh_io.read_positions(obj.data), shown)
+
+
 def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
     from types import SimpleNamespace
     from skin_detach_addon.core.proxy_solves import follow_start
