@@ -158,8 +158,7 @@ def our_drag(name, points, triangles, faces, moves, rest_ms, busy=False):
     load = os.getloadavg()[0]
     obj, handle, scenario = rigged(name, points, triangles, faces)
     with spinning(busy):
-        drag = _drag(obj, handle, points, moves, rest_ms)
-    frames, matrices, figures = drag
+        frames, matrices, figures = _drag(obj, handle, points, moves, rest_ms)
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
 
     # The converged path: the same transforms, each solved to the settle tolerance from the last.
