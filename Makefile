@@ -48,7 +48,7 @@ test42: $(VENV42)/.installed
 # Measure the drag and the quality again and rewrite docs/benchmarks.md from their JSON (with
 # bench/results/scale.json as last measured: scripts/benchmark_scale.py is long, run it by hand).
 bench: $(VENV)/.installed
-	$(PY) scripts/benchmark_drag.py --json bench/results/drag.json
+	$(PY) scripts/benchmark_drag.py --busy --json bench/results/drag.json
 	$(PY) scripts/benchmark_quality.py --poses 100 --json bench/results/quality.json
 	$(PY) scripts/benchmark_quality.py --rigs --json bench/results/rigs.json
 	$(PY) scripts/benchmark_page.py

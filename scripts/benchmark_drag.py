@@ -1,7 +1,8 @@
 """The modal drag as an artist feels it, beside Blender's own stack on the same mesh.
 
     python scripts/benchmark_drag.py [--meshes horse,ogre,beetle-alt,cow,cheburashka,armadillo,bunny,rocker-arm,
-                                               armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150] [--json PATH]
+                                               armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150]
+                                              [--busy] [--busy-rest-ms 300] [--json PATH]
 
 Meshes: tests/data's (the shared ones) and bench/data's, which the project was not tuned on (see
 bench/data/README.md: a horse with thin legs, a multi-part ogre of 44 components, a car body of
@@ -31,11 +32,22 @@ then confirms. Figures:
 
 Goals (issue 36): release pop <= 2e-3 of the diagonal, tracking median <= 5e-3 of the diagonal,
 path ratio 0.8-1.3, confirm <= 150 ms, our move p95 <= 1.5x the stack's.
+
+``--busy`` (issue 44: an artist's Blender draws, other programs run): after each mesh's row the
+same drag again with one core kept busy by a separate process (a Python busy loop, started before
+the session opens and killed once the confirm is measured), ``--busy-rest-ms`` of rest: a busy row
+per mesh, saved under the row's ``busy`` key with the goals it fails and ``worst``, its worst
+figure over its goal. Its goals are the same but the stack's (not measured beside it): pop (after
+the longer rest), tracking, path, confirm. Every row records the 1-minute load average when it
+began (``load``): the machine's other work.
 """
 
 import argparse
+import contextlib
 import math
+import os
 import pathlib
+import subprocess
 import sys
 import time
 
@@ -70,9 +82,15 @@ GOALS = {
 }
 
 
-def failed(row):
-    """The goals ``row`` fails, worst first, and its worst figure over its goal."""
-    past = {goal: figure(row) for goal, figure in GOALS.items()}
+#: The goals of a busy row (no stack is measured beside it).
+BUSY_GOALS = ("pop", "tracking", "path", "confirm")
+#: What the spinning process runs: one core busy until it is killed.
+SPIN = "while True:\n    pass\n"
+
+
+def failed(row, goals=tuple(GOALS)):
+    """The ``goals`` ``row`` fails, worst first, and its worst figure over its goal."""
+    past = {goal: GOALS[goal](row) for goal in goals}
     return sorted((goal for goal in past if past[goal] > 1.0), key=lambda goal: -past[goal]), max(past.values())
 
 
@@ -120,10 +138,54 @@ def path_length(frames, rest):
     return total
 
 
-def our_drag(name, points, triangles, faces, moves, rest_ms):
+@contextlib.contextmanager
+def spinning(busy):
+    """With ``busy``: a separate process keeping one core busy (a Python busy loop) while the
+    block runs, killed at its end (also when the block raises); without: nothing."""
+    if not busy:
+        yield None
+        return
+    spinner = subprocess.Popen([sys.executable, "-c", SPIN], stdin=subprocess.DEVNULL)
+    try:
+        time.sleep(0.2)  # scheduled and spinning before the drag opens
+        yield spinner
+    finally:
+        spinner.kill()
+        spinner.wait()
+
+
+def our_drag(name, points, triangles, faces, moves, rest_ms, busy=False):
+    load = os.getloadavg()[0]
     obj, handle, scenario = rigged(name, points, triangles, faces)
+    with spinning(busy):
+        frames, matrices, figures = _drag(obj, handle, points, moves, rest_ms)
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+
+    # The converged path: the same transforms, each solved to the settle tolerance from the last.
+    obj, handle, _ = rigged(name, points, triangles, faces)
+    errors, converged = [], []
+    for matrix, frame in zip(matrices, frames):
+        handle.matrix_world = matrix
+        api.deform(obj, follow=True)
+        converged.append(shown(obj))
+        errors.append(float(np.linalg.norm(frame - converged[-1], axis=1).max()) / diagonal)
+    rest = points.astype(np.float32).astype(np.float64)
+    ratio = path_length(frames, rest) / max(path_length(converged, rest), 1e-300)
+    return dict(figures, tracking_median=float(np.median(errors)), tracking_max=float(np.max(errors)),
+                path_ratio=ratio, load=load), scenario
+
+
+def view_axis(points):
+    """(3,) the unit axis the view looks along (against): the mesh's shortest."""
     axis = np.zeros(3)
     axis[int(np.argmin(np.ptp(points, axis=0)))] = 1.0
+    return axis
+
+
+def _drag(obj, handle, points, moves, rest_ms):
+    """The session of :func:`our_drag` on the rigged ``obj``: (shown frames, the handle's matrices,
+    figures)."""
+    axis = view_axis(points)
     view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
     centre = np.array(view.to_screen(handle.matrix_world.to_translation()))
     start = tuple(centre + (RADIUS_PX, 0.0))
@@ -158,22 +220,11 @@ def our_drag(name, points, triangles, faces, moves, rest_ms):
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     pop = float(np.linalg.norm(written - rested, axis=1).max()) / diagonal
     proxy_faces = api.figures(obj)["build"]["proxy_faces"]
-
-    # The converged path: the same transforms, each solved to the settle tolerance from the last.
-    obj, handle, _ = rigged(name, points, triangles, faces)
-    errors, converged = [], []
-    for matrix, frame in zip(matrices, frames):
-        handle.matrix_world = matrix
-        api.deform(obj, follow=True)
-        converged.append(shown(obj))
-        errors.append(float(np.linalg.norm(frame - converged[-1], axis=1).max()) / diagonal)
-    rest = points.astype(np.float32).astype(np.float64)
-    ratio = path_length(frames, rest) / max(path_length(converged, rest), 1e-300)
-    return {"proxy_faces": proxy_faces, "move_ms_median": float(np.median(times)), "move_ms_p95": percentile(times, 95),
-            "move_ms_max": float(np.max(times)), "unconverged_moves": int(unconverged),
-            "tracking_median": float(np.median(errors)), "tracking_max": float(np.max(errors)), "path_ratio": ratio,
-            "settle_slices": timers, "settle_ms": settle_ms, "settled": settled, "confirm_ms": confirm_ms,
-            "confirm_converged": bool(session.last.converged), "release_pop": pop}, axis, scenario
+    return frames, matrices, {
+        "proxy_faces": proxy_faces, "move_ms_median": float(np.median(times)), "move_ms_p95": percentile(times, 95),
+        "move_ms_max": float(np.max(times)), "unconverged_moves": int(unconverged), "settle_slices": timers,
+        "settle_ms": settle_ms, "settled": settled, "confirm_ms": confirm_ms,
+        "confirm_converged": bool(session.last.converged), "release_pop": pop}
 
 
 def stack_drag(points, triangles, faces, axis, scenario, moves):
@@ -196,19 +247,36 @@ def stack_drag(points, triangles, faces, axis, scenario, moves):
     return {"step_ms_median": float(np.median(times)), "step_ms_p95": percentile(times, 95), "moved": moved}
 
 
+def rest_text(ours):
+    return (f"{ours['settle_slices']}, {ours['settle_ms']:.0f}" if ours["settled"] else
+            f"not settled ({ours['settle_slices']} slices)")
+
+
 def line(row):
     """A table row of ``row`` (see :func:`our_drag`, :func:`stack_drag`)."""
     ours, stack = row, row["stack"]
     ratio = f"{ours['move_ms_p95'] / stack['step_ms_p95']:.2f}" if stack and stack["moved"] else "-"
-    rest_text = (f"{ours['settle_slices']}, {ours['settle_ms']:.0f}" if ours["settled"] else
-                 f"not settled ({ours['settle_slices']} slices)")
     stack_text = (f"{stack['step_ms_median']:.1f} / {stack['step_ms_p95']:.1f} "
                   f"({'yes' if stack['moved'] else 'no: refused'})") if stack else "did not bind"
     return (f"| {row['mesh']} | {row['vertices']:,} | {ours['proxy_faces']} | {ours['move_ms_median']:.1f} / "
             f"{ours['move_ms_p95']:.1f} / {ours['move_ms_max']:.1f} | {ours['unconverged_moves']} | "
             f"{ours['tracking_median']:.1e} / {ours['tracking_max']:.1e} | {ours['path_ratio']:.2f} | "
-            f"{rest_text} | {ours['release_pop']:.1e} | {ours['confirm_ms']:.0f} | {stack_text} | {ratio} | "
+            f"{rest_text(ours)} | {ours['release_pop']:.1e} | {ours['confirm_ms']:.0f} | {stack_text} | {ratio} | "
             f"{', '.join(row['fails']) or 'none'} |")
+
+
+BUSY_HEADER = ("| mesh | vertices | move ms median / p95 / max | uncertified moves | tracking median / max (diag) | "
+               "path ratio | settled after (slices, ms) | release pop (diag) | confirm ms | load (1 min) | fails |\n"
+               + "|---" * 11 + "|")
+
+
+def busy_line(row):
+    """A busy table row of ``row`` (its ``busy`` figures, see :func:`our_drag`)."""
+    busy = row["busy"]
+    return (f"| {row['mesh']} | {row['vertices']:,} | {busy['move_ms_median']:.1f} / {busy['move_ms_p95']:.1f} / "
+            f"{busy['move_ms_max']:.1f} | {busy['unconverged_moves']} | {busy['tracking_median']:.1e} / "
+            f"{busy['tracking_max']:.1e} | {busy['path_ratio']:.2f} | {rest_text(busy)} | {busy['release_pop']:.1e} | "
+            f"{busy['confirm_ms']:.0f} | {busy['load']:.2f} | {', '.join(busy['fails']) or 'none'} |")
 
 
 def main():
@@ -218,6 +286,9 @@ def main():
     parser.add_argument("--faces", default="1000")
     parser.add_argument("--moves", type=int, default=60)
     parser.add_argument("--rest-ms", type=float, default=150.0)
+    parser.add_argument("--busy", action="store_true",
+                        help="after each row, the same drag with one core kept busy by a separate process")
+    parser.add_argument("--busy-rest-ms", type=float, default=300.0)
     parser.add_argument("--json")
     args = parser.parse_args()
     if not hasattr(bpy.types.Scene, "skin_detach"):
@@ -232,17 +303,28 @@ def main():
     for name in [n for n in args.meshes.split(",") if n]:
         points, triangles = mesh(name)
         for faces in [int(f) for f in args.faces.split(",") if f]:
-            ours, axis, scenario = our_drag(name, points, triangles, faces, args.moves, args.rest_ms)
-            stack = stack_drag(points, triangles, ours["proxy_faces"], axis, scenario, args.moves)
+            ours, scenario = our_drag(name, points, triangles, faces, args.moves, args.rest_ms)
+            stack = stack_drag(points, triangles, ours["proxy_faces"], view_axis(points), scenario, args.moves)
             row = dict(mesh=name, vertices=int(points.shape[0]), **ours, stack=stack)
             row["fails"] = failed(row)[0]
+            if args.busy:
+                row["busy"], _ = our_drag(name, points, triangles, faces, args.moves, args.busy_rest_ms, busy=True)
+                row["busy"]["fails"], row["busy"]["worst"] = failed(row["busy"], BUSY_GOALS)
             rows.append(row)
             print(line(row), flush=True)
+            if args.busy:
+                print(busy_line(row).replace(f"| {name} |", f"| {name} (busy) |", 1), flush=True)
     print("\n## The same, the worst case first\n")
     print(header)
     rows.sort(key=lambda row: -failed(row)[1])
     for row in rows:
         print(line(row))
+    if args.busy:
+        print(f"\n## With one core busy (a spinning process beside the drag), {args.busy_rest_ms:g} ms of rest, the "
+              f"worst case first\n")
+        print(BUSY_HEADER)
+        for row in sorted(rows, key=lambda row: -row["busy"]["worst"]):
+            print(busy_line(row))
     if args.json:
         report.save(args.json, rows)
 

@@ -48,8 +48,30 @@ def drag_section(data):
          else "not settled"),
         ("release pop (diag)", lambda r: f"{r['release_pop']:.1e}"), ("confirm ms", lambda r: f"{r['confirm_ms']:.0f}"),
         ("stack step ms median / p95", lambda r: f"{stack(r, 'step_ms_median')} / {stack(r, 'step_ms_p95')}"),
-        ("our p95 / stack p95", ratio), ("fails", lambda r: (", ".join(r["fails"]) or "none") if "fails" in r else "-"),
+        ("our p95 / stack p95", ratio), ("load (1 min)", lambda r: f"{r['load']:.2f}" if "load" in r else "-"),
+        ("fails", lambda r: (", ".join(r["fails"]) or "none") if "fails" in r else "-"),
     ]
+    busy = [
+        ("mesh", lambda r: r["mesh"]), ("vertices", lambda r: f"{r['vertices']:,}"),
+        ("move ms median / p95 / max", lambda r: f"{r['busy']['move_ms_median']:.1f} / {r['busy']['move_ms_p95']:.1f} / "
+                                                 f"{r['busy']['move_ms_max']:.1f}"),
+        ("tracking median / max (diag)", lambda r: f"{r['busy']['tracking_median']:.1e} / "
+                                                   f"{r['busy']['tracking_max']:.1e}"),
+        ("path ratio", lambda r: f"{r['busy']['path_ratio']:.2f}"),
+        ("settled after (slices, ms)", lambda r: f"{r['busy']['settle_slices']}, {r['busy']['settle_ms']:.0f}"
+         if r["busy"]["settled"] else f"not settled ({r['busy']['settle_slices']} slices)"),
+        ("release pop (diag)", lambda r: f"{r['busy']['release_pop']:.1e}"),
+        ("confirm ms", lambda r: f"{r['busy']['confirm_ms']:.0f}"),
+        ("load (1 min)", lambda r: f"{r['busy']['load']:.2f}"),
+        ("fails", lambda r: ", ".join(r["busy"]["fails"]) or "none"),
+    ]
+    busy_rows = [row for row in data["rows"] if "busy" in row]
+    busy_part = ("\n### With one core busy\n\nThe same drag again right after each row above, a separate process "
+                 "keeping one core busy (a Python busy loop) from before the session opens until the confirm is "
+                 "measured, and the rest longer (the command's `--busy-rest-ms`); the load is the 1-minute load "
+                 "average when the row began (the machine's other work). Goals: tracking median <= 5e-3, path "
+                 "0.8-1.3, pop <= 2e-3, confirm <= 150 ms; rows worst first.\n\n" +
+                 table(busy, sorted(busy_rows, key=lambda r: -r["busy"]["worst"]))) if busy_rows else ""
     return ("## The modal drag beside Blender's stack\n\n"
             "R, the handle turned 90 degrees about the view axis in 60 mouse moves, 150 ms of rest (TIMER events), "
             "then confirm. Tracking: the shown mesh after each move against the converged path (the same handle "
@@ -58,8 +80,9 @@ def drag_section(data):
             "count + Hook + Laplacian Deform + Surface Deform, stepped through the same turn in the same process (no "
             "ratio where its Laplacian Deform found no solution). Goals: pop <= 2e-3, tracking median <= 5e-3, path "
             "0.8-1.3, confirm <= 150 ms, our p95 <= 1.5x the stack's; rows worst first, each naming the goals it "
-            "fails. horse, ogre and beetle-alt (bench/data) are meshes the drag was not tuned on.\n\n" + heading(data["meta"]) + "\n" +
-            table(columns, data["rows"]))
+            "fails. horse, ogre and beetle-alt (bench/data) are meshes the drag was not tuned on. Load: the "
+            "1-minute load average when the row began (the machine's other work; 2 cores).\n\n" + heading(data["meta"]) + "\n" +
+            table(columns, data["rows"]) + busy_part)
 
 
 def quality_section(data):

@@ -111,3 +111,51 @@ def test_quality_benchmark_rigs_option_measures_every_rig_on_a_small_mesh(tmp_pa
     assert face["add_handle_s_max"] >= face["add_handle_s_median"] > 0
     bad = {path: value for path, value in numbers(rows) if not math.isfinite(value)}
     assert not bad
+
+
+def test_drag_benchmark_busy_option_spins_a_core_beside_each_drag_and_saves_a_busy_row(tmp_path):
+    script = BENCHMARK.parent / "benchmark_drag.py"
+    run = subprocess.run([sys.executable, str(script), "--meshes", "spot", "--faces", "300", "--moves", "3",
+                          "--rest-ms", "20", "--busy", "--busy-rest-ms", "40", "--json", str(tmp_path / "d.json")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "| spot (busy) |" in run.stdout and "## With one core busy" in run.stdout and "40 ms of rest" in run.stdout
+    saved = json.loads((tmp_path / "d.json").read_text())
+    assert "--busy" in saved["meta"]["command"]
+    [row] = saved["rows"]
+    quiet, busy = row, row["busy"]
+    for figures in (quiet, busy):
+        assert figures["move_ms_median"] > 0 and figures["tracking_median"] >= 0 and figures["path_ratio"] > 0
+        assert figures["load"] >= 0 and figures["release_pop"] >= 0 and figures["confirm_ms"] > 0
+    assert "stack" not in busy and set(busy["fails"]) <= {"pop", "tracking", "path", "confirm"}
+    assert busy["worst"] > 0
+    bad = {path: value for path, value in numbers(row) if not math.isfinite(value)}
+    assert not bad
+    # The page shows the busy rows under the quiet table.
+    (tmp_path / "results").mkdir()
+    (tmp_path / "d.json").rename(tmp_path / "results" / "drag.json")
+    page = subprocess.run([sys.executable, str(BENCHMARK.parent / "benchmark_page.py"), "--results",
+                           str(tmp_path / "results"), "--out", str(tmp_path / "b.md")], capture_output=True, text=True)
+    assert page.returncode == 0, page.stderr
+    text = (tmp_path / "b.md").read_text()
+    assert text.index("| spot | ") < text.index("### With one core busy") < text.rindex("| spot | ")
+
+
+def test_the_spinner_keeps_a_core_busy_while_the_block_runs_and_is_killed_after_it():
+    sys.path.insert(0, str(BENCHMARK.parent))
+    try:
+        import benchmark_drag
+    finally:
+        sys.path.remove(str(BENCHMARK.parent))
+    with benchmark_drag.spinning(False) as none:
+        assert none is None
+    with benchmark_drag.spinning(True) as spinner:
+        assert spinner.poll() is None                       # spinning
+        stat = pathlib.Path(f"/proc/{spinner.pid}/stat")
+        if stat.exists():                                   # Linux: it burns CPU time, not sleeps
+            assert int(stat.read_text().rsplit(")", 1)[1].split()[11]) > 0
+    assert spinner.poll() is not None                       # killed at the end
+    with pytest.raises(RuntimeError):
+        with benchmark_drag.spinning(True) as spinner:
+            raise RuntimeError("a failed drag")
+    assert spinner.poll() is not None                       # killed when the block raised, too

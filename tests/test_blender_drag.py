@@ -283,6 +283,57 @@ def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_resto
     _same(_state(obj), before)
 
 
+def test_a_busy_machine_shows_the_same_drag_later_not_another_one(scene, monkeypatch):
+    """The moves' and the settle's budgets count work: a wall clock that runs 1,000 times fast (another
+    program taking the core between reads) changes no shown shape, where it cut every move short."""
+    import time
+
+    def drag(busy):
+        with monkeypatch.context() as patch:
+            reads = iter(range(1, 1 << 30))
+            patch.setattr(time, "thread_time", lambda: next(reads) * 1e-4)  # the same CPU clock both times
+            bpy.ops.wm.read_homefile(use_empty=True)
+            obj = import_spot()
+            handle = rig(obj, axis=1)
+            if busy:
+                real = time.perf_counter
+                patch.setattr(time, "perf_counter", lambda: 1000.0 * real())
+            session = DragSession(obj, handle, TopView(0.01), (0, 0))
+            session.event("R", "PRESS", (0, 0))
+            shown = []
+            for k in range(1, 7):
+                session.event("MOUSEMOVE", "NOTHING", (-30 * k, 100))
+                shown.append(mesh_io.read_positions(obj.data).copy())
+            for _ in range(3):
+                session.event("TIMER", "NOTHING", (-180, 100))
+                shown.append(mesh_io.read_positions(obj.data).copy())
+            assert session.event("ESC", "PRESS", (-180, 100)) == CANCELLED
+        return shown
+
+    quiet, busy = drag(False), drag(True)
+    assert all(np.array_equal(a, b) for a, b in zip(quiet, busy))
+
+
+def test_on_a_machine_fifty_times_slower_the_drag_still_settles_and_confirms_what_it_showed(scene, monkeypatch):
+    import time
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    real = time.thread_time
+    monkeypatch.setattr(time, "thread_time", lambda: 50.0 * real())  # every unit of work costs 50 times the CPU
+    session = DragSession(obj, handle, TopView(0.01), (0, 0))
+    session.event("R", "PRESS", (0, 0))
+    for k in range(1, 9):
+        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
+    for slices in range(1, 400):
+        session.event("TIMER", "NOTHING", (-160, 100))
+        if session.settled:
+            break
+    assert session.settled and slices > 1                    # less per slice, and still settled
+    shown = mesh_io.read_positions(obj.data).copy()
+    assert session.event("LEFTMOUSE", "PRESS", (-160, 100)) == FINISHED
+    assert np.array_equal(mesh_io.read_positions(obj.data), shown)
+
+
 def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
     from types import SimpleNamespace
     from skin_detach_addon.core.proxy_solves import follow_start

@@ -166,8 +166,9 @@ def _bent_start(spot_proxy):
     return DualLaplacian(points, tris, ids), targets, start
 
 
-def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy):
-    from skin_detach_addon.core.projected_newton import _newton_step
+def test_conjugate_gradients_stop_past_the_budget_with_a_descent_step(spot_proxy):
+    from skin_detach_addon.core.projected_newton import CG_OVERRUN, _newton_step
+    from skin_detach_addon.core.work_budget import WorkBudget
     solver, targets, x = _bent_start(spot_proxy)
     state = solver.energy_terms.at(x)
     free = solver.free
@@ -181,15 +182,17 @@ def test_conjugate_gradients_stop_at_the_deadline_with_a_descent_step(spot_proxy
     def precondition(r):
         return solver._solve_k(r)
     unlimited = _newton_step(hessian, precondition, gradient)
-    now = time.perf_counter()
-    stopped = _newton_step(hessian, precondition, gradient, deadline=now - 1.0, late=now - 1.0)
-    assert stopped[2] == 1 < unlimited[2]                     # one Hessian product, then the deadline
+    spent = WorkBudget(1)
+    spent.spend(2 + int(CG_OVERRUN))                          # spent, and past the overrun
+    stopped = _newton_step(hessian, precondition, gradient, spent)
+    assert stopped[2] == 1 < unlimited[2]                     # one Hessian product, then the budget
     assert np.sum(stopped[0] * gradient) < 0.0                # still a descent direction
-    # Past the deadline but not late, CG goes on until what is left of the step is within tol.
+    # Past the budget but not the overrun, CG goes on until what is left of the step is within tol.
     size = diagonal(spot_proxy[0])
-    going_on = _newton_step(hessian, precondition, gradient, deadline=now - 1.0, late=now + 60.0, tol=1e-6,
-                            diagonal=size)
-    assert stopped[2] < going_on[2] <= unlimited[2]
+    budget = WorkBudget(100)
+    budget.spend(100)
+    going_on = _newton_step(hessian, precondition, gradient, budget, tol=1e-6, diagonal=size)
+    assert stopped[2] < going_on[2] <= unlimited[2] and budget.spent == 100 + going_on[2]
     assert np.sum(stopped[0] * gradient) > np.sum(going_on[0] * gradient)  # a longer descent
     moved = x.copy()
     partial = solver.solve(targets, initial=moved, max_iter=100, tol=1e-12, budget_ms=1e-6)
@@ -214,3 +217,110 @@ def test_a_failed_step_is_shortened_to_the_parabola_s_minimiser_within_a_tenth_t
         assert _shorter(1.0, slope, rise) == pytest.approx(expected)
     assert _shorter(0.5, slope, slope * 0.5 + 4.0 * 0.25) == pytest.approx(0.25)  # the same parabola from 0.5
     assert _shorter(1.0, slope, slope - 1.0) == pytest.approx(0.5)  # curving down: halved
+
+
+def _jumpy_clocks(monkeypatch, factor):
+    """Make the wall clock and the thread's CPU clock run ``factor`` times fast, jumping on every
+    read (another program taking the core, a slower machine)."""
+    for name in ("perf_counter", "thread_time", "process_time"):
+        real = getattr(time, name)
+        ticks = iter(range(1, 1 << 30))
+        monkeypatch.setattr(time, name, lambda real=real, ticks=ticks: factor * real() + next(ticks) * 1e-3)
+
+
+def test_a_budget_in_work_units_gives_the_same_iterate_whatever_the_clock_does(spot_proxy, monkeypatch):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    start = points.copy()
+    start[ids] = 0.5 * (points[ids] + targets)  # a move's start: the handles half way
+
+    def moves(units):
+        solver = DualLaplacian(points, tris, ids)
+        results, x = [], start
+        for k in range(1, 4):
+            part = points[ids] + k / 3 * (targets - points[ids])
+            results.append(solver.solve(part, initial=x, max_iter=100, tol=1e-12, budget_units=units))
+            x = results[-1].vertices
+        return results
+
+    quiet = moves(12)
+    _jumpy_clocks(monkeypatch, 1000.0)
+    busy = moves(12)
+    for a, b in zip(quiet, busy):
+        assert np.array_equal(a.vertices, b.vertices) and a.iterations == b.iterations
+    assert not quiet[-1].converged and moves(10 ** 6)[-1].converged  # the budget did stop it
+    with pytest.raises(SkinDetachError, match="budget_units: expected a positive integer, got 0"):
+        DualLaplacian(points, tris, ids).solve(targets, budget_units=0)
+    with pytest.raises(SkinDetachError, match="budget_units: expected None with budget_ms given"):
+        DualLaplacian(points, tris, ids).solve(targets, budget_ms=4.0, budget_units=5)
+
+
+@pytest.mark.parametrize("preserve_volume", [False, True])
+def test_a_budgeted_solve_never_ends_above_its_start_however_little_the_budget(spot_proxy, preserve_volume):
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids, preserve_volume=preserve_volume)
+    nearer = points.copy()
+    nearer[ids] = points[ids] + 0.9 * (targets - points[ids])   # a move's start: one step from the targets
+    for initial in (points, nearer):                           # a far jump (stages) and a near one
+        at_targets = initial.copy()
+        at_targets[ids] = targets
+        for units in (1, 3, 10, 30, 100):
+            result = solver.solve(targets, initial=initial, max_iter=100, tol=1e-12, budget_units=units)
+            assert np.all(np.diff(result.energy) <= 0.0)              # no iterate above the one before
+            assert solver.energy(result.vertices) <= solver.energy(at_targets)
+            assert np.isfinite(result.vertices).all()
+
+
+def test_the_work_rate_turns_milliseconds_into_units_at_the_measured_cost():
+    from skin_detach_addon.core.work_budget import WorkRate
+    rate = WorkRate(0.5)
+    assert rate.budget(4.0).units == 8
+    for _ in range(30):                            # the machine turns out twice as slow at the work
+        rate.record(20, 20.0)
+    assert rate.budget(4.0).units == 4 and rate.ms_per_unit == pytest.approx(1.0, rel=1e-3)
+    assert rate.budget(1e-6).units == 1            # never less than one unit: the first iteration runs
+    rate.record(0, 5.0)                            # a solve that did no work measures nothing
+    assert rate.budget(4.0).units == 4
+
+
+def test_a_slow_clock_still_settles_and_the_solver_measures_its_work_in_cpu_time(spot_proxy, monkeypatch):
+    from skin_detach_addon.core.proxy_solves import SETTLE_SLICE_MS
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    solver = DualLaplacian(points, tris, ids)
+    start = points.copy()
+    start[ids] = points[ids] + 0.9 * (targets - points[ids])
+    moved = solver.solve(start[ids], initial=start, max_iter=100, tol=1e-8, budget_ms=4.0)
+    quiet_units = solver.rate.budget(SETTLE_SLICE_MS).units
+    _jumpy_clocks(monkeypatch, 50.0)              # every unit now costs 50 times the CPU time
+    x, energies = moved.vertices, []
+    for slices in range(1, 400):
+        result = solver.solve(targets, initial=x, max_iter=100, tol=1e-12, budget_ms=SETTLE_SLICE_MS, idle=True)
+        energies += result.energy
+        x = result.vertices
+        if result.converged:
+            break
+    assert result.converged and slices > 1
+    assert solver.rate.budget(SETTLE_SLICE_MS).units < quiet_units  # a slower machine does less per slice
+    cold = DualLaplacian(points, tris, ids).solve(targets, max_iter=100, tol=1e-12)
+    assert np.abs(x - cold.vertices).max() <= 1e-5 * diagonal(points)
+
+
+def test_a_settle_after_moves_that_needed_many_cg_steps_makes_the_factor_first(spot_proxy):
+    from skin_detach_addon.core.projected_newton import REFRESH_STEPS
+    solver, targets, _ = _bent_start(spot_proxy)
+    moved = solver.solve(targets, max_iter=100, tol=1e-8)  # the bend, every step preconditioned at rest
+    assert solver._lagged.at_rest and solver._lagged.steps > REFRESH_STEPS  # a step's CG needed many steps
+    # The least budget a settle slice gets: its first step is preconditioned by a factor made here.
+    first = solver.solve(targets, initial=moved.vertices, max_iter=100, tol=1e-12, budget_units=1, idle=True)
+    assert not solver._lagged.at_rest and solver._lagged.steps <= REFRESH_STEPS
+    assert first.energy[-1] <= first.energy[0]
+
+
+def test_a_proxy_with_every_vertex_constrained_has_no_work_to_time_and_solves_at_once():
+    from shapes import plane
+    points, tris = plane(4)
+    solver = DualLaplacian(points, tris, np.arange(points.shape[0]))
+    result = solver.solve(points + 1.0, budget_ms=4.0)
+    assert result.converged and np.array_equal(result.vertices, points + 1.0)

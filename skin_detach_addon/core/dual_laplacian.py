@@ -36,7 +36,6 @@ point, not the minimiser of an energy: it can cycle, and then returns its calmes
 optionally with the rigidity spokes.
 """
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +50,7 @@ from .pulled_energy import STRENGTH, PulledEnergy
 from .rotated_energy import RotatedEnergy
 from .validation import as_points, as_triangles, as_vertex_ids
 from .volume_constraint import VolumeConstraint
+from .work_budget import WorkBudget, WorkRate, cpu_ms
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
 DEGENERATE_DUAL = 1e-10
@@ -297,9 +297,26 @@ class DualLaplacian:
         self._factor(self.energy_terms.gram[self.free][:, self.free])
         #: The factored Hessian preconditioning the Newton steps (at rest until a settle refreshes it).
         vertex_groups = k + self.free if self.rigidity else None
-        self._lagged = LaggedHessian(HessianFactor(self.energy_terms, self.free, m), self.energy_terms.at(self.rest),
+        rest_state = self.energy_terms.at(self.rest)
+        self._lagged = LaggedHessian(HessianFactor(self.energy_terms, self.free, m), rest_state,
                                      None if vertex_groups is None else lambda state: state.rotations(vertex_groups))
+        #: CPU milliseconds per unit of work (:mod:`.work_budget`): first one unit's, timed here at
+        #: rest (a Hessian product and a preconditioner solve; nothing to time without a free
+        #: vertex, whose solves do no work), then every solve's.
+        self.rate = WorkRate(self._time_unit(rest_state, m) if self.free.size else 1.0)
         self.energy_terms.reset()
+
+    def _time_unit(self, state, m):
+        """CPU milliseconds of one unit of work at ``state``: a Hessian product and a solve of the
+        held factor (of K without one), the faster of two (the first may pay for cold caches)."""
+        solve = self._lagged.solver(state) or self._solve_k
+        probe = np.ones((m, 3))
+        times = []
+        for _ in range(2):
+            begun = cpu_ms()
+            solve(self.energy_terms.hessian_product(state, probe)[self.free])
+            times.append(cpu_ms() - begun)
+        return max(min(times), 1e-6)
 
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
@@ -376,7 +393,7 @@ class DualLaplacian:
         return out
 
     def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None, idle=False,
-              pull_motions=None):
+              pull_motions=None, budget_units=None):
         """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3)
         and the pulls' detail follows ``pull_motions`` (one (4, 4) rigid motion per pull; None:
         each holds its detail at rest).
@@ -385,9 +402,11 @@ class DualLaplacian:
         whatever was solved before); ``initial`` (m, 3), e.g. the extrapolated previous moves of a
         drag, starts it there instead. "rotated": converged when the Newton step's largest vertex
         move, squared over the squared diagonal, is at most ``tol`` (:mod:`.projected_newton`);
-        ``budget_ms`` (None: no limit) stops it before an iteration that, taking as long as the
-        last, would end past that many milliseconds (not converged: the next call may continue
-        from its result; the first iteration always runs). "paper": stops
+        ``budget_ms`` (None: no limit) stops it before an iteration that, costing as much work as
+        the last, would end past the work this machine does in that many milliseconds of CPU
+        (:attr:`rate`; not converged: the next call may continue from its result; the first
+        iteration always runs), ``budget_units`` likewise past that many units of work
+        (:mod:`.work_budget`; the same iterate whatever the clock does). "paper": stops
         when the largest squared move of a vertex in one iteration is at most ``tol``, or when
         :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
@@ -395,7 +414,6 @@ class DualLaplacian:
         waits on this solve (a drag's settle while the mouse rests), so it may factor the Hessian
         that preconditions the next solves (:class:`.hessian_factor.LaggedHessian`).
         """
-        begun = time.perf_counter()
         targets = as_points("constrained_positions", constrained_positions, self.constrained.size)
         points = self.rest.copy() if initial is None else as_points("initial", initial, self.rest.shape[0]).copy()
         if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
@@ -405,6 +423,9 @@ class DualLaplacian:
         if budget_ms is not None and (isinstance(budget_ms, bool) or not isinstance(budget_ms, (int, float, np.number))
                                       or not budget_ms > 0):
             raise SkinDetachError(f"budget_ms: expected None or a number of milliseconds > 0, got {budget_ms!r}")
+        if budget_units is not None and budget_ms is not None:
+            raise SkinDetachError(f"budget_units: expected None with budget_ms given ({budget_ms!r}), got "
+                                  f"{budget_units!r}")
         motions = [np.eye(4)] * self.n_pulls if pull_motions is None else list(pull_motions)
         if len(motions) != self.n_pulls:
             raise SkinDetachError(f"pull_motions: expected {self.n_pulls} (4, 4) motions, got {len(motions)}")
@@ -418,9 +439,14 @@ class DualLaplacian:
             if initial is None:  # from rest, bit for bit the same whatever was solved before
                 self.energy_terms.reset()
                 self._lagged.reset()
-            deadline = None if budget_ms is None else begun + budget_ms / 1000.0
-            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), deadline,
-                                          bool(idle) and initial is not None, motions)
+            budget = self.rate.budget(budget_ms) if budget_ms is not None else (
+                None if budget_units is None else WorkBudget(budget_units))
+            work = budget if budget is not None else WorkBudget(1 << 62)  # counts an unbudgeted solve's work
+            begun = cpu_ms()
+            result = self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), budget, work,
+                                            bool(idle) and initial is not None, motions)
+            self.rate.record(work.spent, cpu_ms() - begun)
+            return result
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -475,12 +501,14 @@ class DualLaplacian:
         """K^-1 over the free vertices for ``values`` (f, j)."""
         return self._lu.solve(np.ascontiguousarray(values))
 
-    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, deadline, refresh, motions):
+    def _continue_rotated(self, points, start, fixed_points, max_iter, tol, budget, work, refresh, motions):
         """Where the constrained vertices jump far from ``start`` (their positions in the initial
         guess), reach ``fixed_points`` through evenly spaced intermediate constraints, each
         solved loosely from the last (continuation), so a start from rest lands on the minimum a
         drag along the way would reach, not on a fold the first step happened to fall into. The
-        stages start from rest, so the pulls' ``motions`` are staged from the identity alike."""
+        stages start from rest, so the pulls' ``motions`` are staged from the identity alike.
+        ``budget``: the :class:`.work_budget.WorkBudget` of the solve or None; ``work`` counts the
+        work done (``budget`` itself when there is one)."""
         pulled = self.n_pulls > 0
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         if jump > WARM_LIMIT:
@@ -496,9 +524,9 @@ class DualLaplacian:
             if pulled:
                 self.energy_terms.set_motions([np.eye(4) + (stage / stages) * (motion - np.eye(4)) for motion in motions])
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter, deadline, self._lagged, refresh)
+                              STAGE_TOL, max_iter, work, self._lagged, refresh)
             points = staged.points
-            if deadline is not None and not staged.converged:
+            if budget is not None and not staged.converged:
                 # Out of budget: the handles where they belong, the rest where the stages got to; the
                 # next call goes on from there.
                 points[self.fixed] = fixed_points
@@ -508,7 +536,7 @@ class DualLaplacian:
         if pulled:
             self.energy_terms.set_motions(motions)
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
-                          max_iter, deadline, self._lagged, refresh)
+                          max_iter, work, self._lagged, refresh)
         return DualLaplacianResult(result.points, result.iterations, result.converged,
                                    self.volume_change(result.points), result.history, result.energy)
 

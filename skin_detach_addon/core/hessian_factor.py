@@ -114,6 +114,8 @@ class LaggedHessian:
         self._rotations = rotations
         self._rest = self._made(rest_state)
         self._held = self._rest
+        #: The most CG steps a Newton step preconditioned by the held factor needed (since it was made).
+        self.steps = 0
 
     def _made(self, state):
         """(Factored, the free vertices' rotations at ``state`` or None), or None when H is not
@@ -131,6 +133,7 @@ class LaggedHessian:
     def reset(self):
         """Go back to the factor made at rest (the next solve starts as a fresh object's would)."""
         self._held = self._rest
+        self.steps = 0
 
     def solver(self, state):
         """The held factor's solve ((f, 3) -> (f, 3)) turned to ``state`` (an EnergyState), or None
@@ -151,3 +154,4 @@ class LaggedHessian:
         made = self._made(state)
         if made is not None:
             self._held = made
+            self.steps = 0

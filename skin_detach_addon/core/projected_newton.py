@@ -29,24 +29,30 @@ the current point, or the full step just taken (the error after it is then a fra
 it, plus its square).
 """
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .work_budget import FACTOR_UNITS, ITERATION_UNITS
 
 #: CG stops when its residual (in the P^-1 metric) is this fraction of the gradient's ...
 FORCING = 0.05
 #: ... or after this many iterations.
 CG_ITERATIONS = 200
-#: Past the deadline, CG goes on while the rest of its step (P^-1 of its residual) would still
+#: Past the budget, CG goes on while the rest of its step (P^-1 of its residual) would still
 #: move a vertex by more than the tolerance, up to this many times the budget more: a move that
 #: stopped with most of its Newton step undone showed a shape lagging behind, and the next
 #: move's extrapolation carried the lag on (the shown shape flailed).
 CG_OVERRUN = 2.0
 #: In a solve that may refresh the lagged Hessian (a drag's settle while the mouse rests), more CG
-#: steps than this make a new factor (about 15 CG steps' cost at 1,000 faces and 25 at 5,000: more
-#: than it saves within one settle, so a settle without a drag never makes one).
-REFRESH_STEPS = 4
+#: steps than this make a new factor (about 30 CG steps' cost, .work_budget.FACTOR_UNITS: more
+#: than it saves within one settle, so a settle without a drag never makes one): at its start
+#: when a Newton step since the factor was made needed more (the drag's moves did: the first
+#: slice's CG with the old factor took 30 steps and still left the shape 2e-2 of the diagonal
+#: off on cow), else after such a step. 8, not 4: on the cow, whose converged path snaps late in
+#: the benchmark's turn, 4 made a factor in each of the first slices (95 units to 1e-3 of the
+#: diagonal, 65 with 8; the same on four other meshes).
+REFRESH_STEPS = 8
 #: Armijo's sufficient decrease, and the shortenings of the step at most.
 ARMIJO = 1e-4
 BACKTRACKS = 20
@@ -103,28 +109,36 @@ class _Tangent:
         return out
 
 
-def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, deadline=None, lagged=None,
+def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, budget=None, lagged=None,
              refresh=False):
     """Projected Newton (module docstring) from ``points`` (m, 3), whose free rows are the start
     and whose other rows are held. ``volume``: a VolumeConstraint with at least one kept component,
-    or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``deadline``: a
-    time.perf_counter() value no iteration should end after (one that would, taking as long as
-    the last, is not started; the first always runs); ``lagged``: a
+    or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``budget``: a
+    :class:`.work_budget.WorkBudget` (None: no limit) that every iteration spends its work from
+    and that no iteration should end past (one that would, costing as many units as the last, is
+    not started; the first always runs); ``lagged``: a
     :class:`.hessian_factor.LaggedHessian` whose factor preconditions instead of K's when it has
-    one; with ``refresh``, it is made anew at the step accepted after CG needed more than
-    :data:`REFRESH_STEPS` steps (without, the solve is a function of its start and the factor it
-    is given). Returns :class:`NewtonResult`."""
-    opened = time.perf_counter()
-    late = None if deadline is None else deadline + CG_OVERRUN * max(deadline - opened, 0.0)
+    one; with ``refresh``, it is made anew at the start when a Newton step it preconditioned
+    needed more than :data:`REFRESH_STEPS` CG steps (:attr:`~.hessian_factor.LaggedHessian.steps`),
+    else at the step accepted after CG needed that many (without, the solve is a function of its
+    start and the factor it is given); a refresh spends :data:`.work_budget.FACTOR_UNITS`.
+    Returns :class:`NewtonResult`: its energy never rises from one iterate to the next, however
+    little the budget."""
     x = points.copy()
     m = x.shape[0]
     if volume is not None:
         x = volume.restore(x, _Tangent(volume, x, free, solve_k).direction(m))
     state = energy.at(x)
+    if refresh and lagged is not None and lagged.steps > REFRESH_STEPS:
+        lagged.refresh(state)
+        if budget is not None:
+            budget.spend(FACTOR_UNITS)
     history, energies = [], [state.energy]
     converged, iterations = False, 0
     for iterations in range(1, max_iter + 1):
-        begun = time.perf_counter()
+        begun = 0 if budget is None else budget.spent
+        if budget is not None:
+            budget.spend(ITERATION_UNITS)
         solve_p = (lagged.solver(state) if lagged is not None else None) or solve_k
         tangent = _Tangent(volume, x, free, solve_p) if volume is not None else None
         gradient = state.gradient[free]
@@ -146,7 +160,9 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
             y = solve_p(r)
             return y if tangent is None else tangent.project(y)
 
-        step, negative, steps = _newton_step(hessian, precondition, gradient, deadline, late, tol, diagonal)
+        step, negative, steps = _newton_step(hessian, precondition, gradient, budget, tol, diagonal)
+        if lagged is not None:
+            lagged.steps = max(lagged.steps, steps)
         proposed = largest_step(step, diagonal)
         slope = float(np.sum(gradient * step))
         if slope >= 0.0 or not np.isfinite(slope):
@@ -182,15 +198,17 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, dea
         history.append(moved)
         energies.append(accepted_energy)
         converged = not negative and length == 1.0 and moved <= tol
-        now = time.perf_counter()
-        # The next one would end past the deadline: stop (before fitting the rotations at x).
-        last = converged or (deadline is not None and now + (now - begun) > deadline)
+        # The next one, costing as much as this one, would end past the budget: stop (before
+        # fitting the rotations at x).
+        last = converged or (budget is not None and budget.would_pass(budget.spent - begun))
         # A Hessian with negative curvature would not factor positive definite: no refresh then.
-        refreshing = refresh and lagged is not None and not negative and steps > REFRESH_STEPS
+        refreshing = refresh and lagged is not None and not negative and not converged and steps > REFRESH_STEPS
         if not last or refreshing:
             state = accepted_state if accepted_state is not None else energy.at(x)
         if refreshing:
             lagged.refresh(state)
+            if budget is not None:
+                budget.spend(FACTOR_UNITS)
         if last:
             break
     return NewtonResult(x, iterations, converged, history, energies)
@@ -206,12 +224,13 @@ def _shorter(length, slope, rise):
     return min(max(guess, 0.1 * length), 0.5 * length)
 
 
-def _newton_step(hessian, precondition, gradient, deadline=None, late=None, tol=0.0, diagonal=1.0):
-    """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients,
-    stopped early past ``deadline`` (a time.perf_counter() value; every CG iterate is a descent
-    direction) once the rest of the step, the preconditioned residual, moves no vertex by more
-    than ``tol`` (squared, over the squared ``diagonal``), or past ``late`` regardless. Returns
-    (p, whether negative curvature was met, the number of Hessian products)."""
+def _newton_step(hessian, precondition, gradient, budget=None, tol=0.0, diagonal=1.0):
+    """Approximate solution of H p = -gradient (f, 3) by preconditioned conjugate gradients, each
+    step one unit of ``budget`` (a :class:`.work_budget.WorkBudget`, None: no limit), stopped
+    early once it is spent (every CG iterate is a descent direction) and the rest of the step, the
+    preconditioned residual, moves no vertex by more than ``tol`` (squared, over the squared
+    ``diagonal``), or past :data:`CG_OVERRUN` times the budget more regardless. Returns (p,
+    whether negative curvature was met, the number of Hessian products)."""
     residual = -gradient
     z = precondition(residual)
     rz = float(np.sum(residual * z))
@@ -222,6 +241,8 @@ def _newton_step(hessian, precondition, gradient, deadline=None, late=None, tol=
     for k in range(CG_ITERATIONS):
         steps = k + 1
         product = hessian(direction)
+        if budget is not None:
+            budget.spend(1)
         curvature = float(np.sum(direction * product))
         if curvature <= 0.0:
             negative = True
@@ -235,10 +256,8 @@ def _newton_step(hessian, precondition, gradient, deadline=None, late=None, tol=
         rz_next = float(np.sum(residual * z))
         if rz_next <= FORCING ** 2 * start:
             break
-        if deadline is not None:
-            now = time.perf_counter()
-            if now > deadline and (now > late or largest_step(z, diagonal) <= tol):
-                break
+        if budget is not None and budget.over and (budget.past(CG_OVERRUN) or largest_step(z, diagonal) <= tol):
+            break
         direction = z + (rz_next / rz) * direction
         rz = rz_next
     return step, negative, steps

@@ -16,13 +16,16 @@ from .dual_laplacian import DualLaplacian
 DRAG_TOL = 1e-8
 #: ... and when a result is kept (Apply, live update, confirm, bake).
 SETTLE_TOL = 1e-12
-#: Milliseconds of solve in a drag move: one Newton iteration at 1,000 proxy faces, no further
-#: one that would end past it; its conjugate gradients stop past the deadline once the rest of
-#: their step is within the tolerance (projected_newton.CG_OVERRUN), so every move shows a shape
-#: near the path's and a move costs little more than Blender's own stack; the next move, or the
-#: settle while the mouse rests, continues from where it stopped.
+#: Milliseconds of solve in a drag move, counted as work (:mod:`.work_budget`: the units this
+#: machine's solving thread does in that much CPU time, so another program taking the core makes
+#: the move take longer, not do less): one Newton iteration at 1,000 proxy faces, no further one
+#: that would end past it; its conjugate gradients stop past the budget once the rest of their
+#: step is within the tolerance (projected_newton.CG_OVERRUN), so every move shows a shape near
+#: the path's and a move costs little more than Blender's own stack; the next move, or the settle
+#: while the mouse rests, continues from where it stopped.
 DRAG_BUDGET_MS = 4.0
-#: Milliseconds of solve in one slice of the settle while the mouse rests (a TIMER event).
+#: Milliseconds of solve, counted as work alike, in one slice of the settle while the mouse rests
+#: (a TIMER event).
 SETTLE_SLICE_MS = 12.0
 #: Iterations a proxy solve may take before it reports that it did not converge.
 MAX_ITERATIONS = 300
@@ -73,7 +76,8 @@ class ProxySolves:
         owns it, :attr:`~.held_detail.Layout.owned`) pulled along ``motions`` (one (4, 4) per pair
         of ``layout.held``). With ``follow`` the solve starts from
         :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
-        stops after ``budget_ms`` (None: no limit; ``idle``: see :meth:`DualLaplacian.solve`);
+        stops after the work of ``budget_ms`` (None: no limit; ``idle``: see
+        :meth:`DualLaplacian.solve`);
         without it from rest, so the same handles give the same shape whatever was solved before."""
         key = self.prepare(ids, preserve_volume, layout)
         solver, recent = self._solvers[key]
