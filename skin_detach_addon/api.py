@@ -97,14 +97,13 @@ def preparing(obj):
     full-detail rebuild: a drag shows the preview meanwhile and Add Handle does not wait for it; a
     confirm, Apply or bake does), or None when nothing is being prepared."""
     record = stored.cached(_bound(obj))
-    surface = None if record is None else record.surface
-    return None if surface is None or surface.free_rebuild_ready else (surface.free_progress or (0.0, "waiting"))
+    return None if record is None else record.surface.preparing
 
 
 def finish_preparing(obj):
     """Wait until what :func:`preparing` reports is done (or make it now when nothing is making
     it): the next full-detail rebuild then starts at once."""
-    stored.open_binding(_bound(obj)).surface.prepare_free_rebuild(background=False, float32=True)
+    stored.open_binding(_bound(obj)).surface.finish_preparing()
 
 
 def _prepare_after_change(obj):

@@ -14,8 +14,9 @@ import uuid
 
 import numpy as np
 
+from ..core import threads
 from ..core.errors import SkinDetachError
-from ..core.surface import Preview, SkinDetachedSurface
+from ..core.surface import BACKGROUND_ABOVE, Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
 from ..core.held_detail import HeldPlacement, layout_of
 from ..core.proxy_solves import ProxySolves
@@ -70,6 +71,7 @@ class Binding:
         self.last_step = None
         self._mirrors = {}
         self._own_images = {}
+        self._diagonal = None
         self.mesh_guard = MeshGuard()
         self._stretch = None
 
@@ -99,7 +101,9 @@ class Binding:
         for seen, answer in known:  # a comparison: a drag asks every move
             if seen is ids or np.array_equal(seen, ids):
                 return answer
-        tolerance = MIRROR_TOLERANCE * bbox_diagonal(self.rest)
+        if self._diagonal is None:
+            self._diagonal = bbox_diagonal(self.rest)
+        tolerance = MIRROR_TOLERANCE * self._diagonal
         answer = ids.size > 0 and bool(is_own_mirror_image(self.rest[ids], "XYZ".index(axis), tolerance))
         known.append((ids if not ids.flags.writeable else ids.copy(), answer))
         return answer
@@ -147,8 +151,15 @@ class Binding:
         its preview, and the stretch, so the first :meth:`rebuild`, :meth:`rebuild_preview` and
         :meth:`stretch` with it start at once (the rebuilds' float32 copies too: they write into
         float32 buffers)."""
-        self._skin_stretch()
-        self.surface.prepare_layout(layout.groups, layout.held or None, float32=True)
+        # A mesh with a preview drags it: its own rebuild (and stretch) is needed at the confirm
+        # only, and a large one's is made on a background thread (Add Handle does not wait for
+        # it; a confirm may).
+        background = self.preview is not None and self.surface.n_detail >= BACKGROUND_ABOVE
+        if background and self._stretch is None:
+            threads.start_background(self._skin_stretch, "skin_detach_stretch")
+        else:
+            self._skin_stretch()
+        self.surface.prepare_layout(layout.groups, layout.held or None, float32=True, background=background)
         if self.preview is not None:
             self.preview.surface.prepare_layout(layout.groups, self._preview_held_of(layout) or None, float32=True)
 

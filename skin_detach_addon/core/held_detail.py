@@ -29,7 +29,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .geometry import flat_ranges
 from .validation import as_vertex_ids
 
 #: A proxy vertex is held by a selection that brings at least this share of the skin's weight on it.
@@ -148,8 +147,11 @@ def proxy_ownership(surface, ids):
     skin = surface.skin
     m = surface.proxy_vertices.shape[0]
     total = surface.corner_weights()
-    welded = np.unique(surface.weld[as_vertex_ids("ids", ids, surface.n_detail)])
-    rows = flat_ranges(np.searchsorted(skin.vertex, welded), np.searchsorted(skin.vertex, welded, side="right"))[0]
+    chosen = np.zeros(skin.case.shape[0], dtype=bool)
+    chosen[surface.weld[as_vertex_ids("ids", ids, surface.n_detail)]] = True
+    # The selection's associations in the skin's order (grouped by vertex, ascending): a pass over
+    # them, not a sort of a selection of a million vertices and two searches in the skin.
+    rows = np.flatnonzero(chosen[skin.vertex])
     share = skin.weight[rows, None] * np.clip(skin.bary[rows], 0.0, None)
     mine = np.bincount(surface.proxy_faces[skin.face[rows]].ravel(), weights=share.ravel(), minlength=m)
     return np.divide(mine, total, out=np.zeros(m), where=total > 0)
@@ -183,7 +185,7 @@ def held_rows(proxy_vertices, proxy_faces, usable, rest_of, groups, labels):
     corner_groups = groups[proxy_faces]
     whole = usable & (corner_groups[:, 0] >= 0) & (corner_groups == corner_groups[:, :1]).all(axis=1)
     centroids = proxy_vertices[proxy_faces].mean(axis=1)
-    face = np.full(u, -1, dtype=np.int64)
+    face = np.full(u, -1, dtype=np.int32)
     for group in np.unique(labels[labels >= 0]):
         candidates = np.flatnonzero(whole & (corner_groups[:, 0] == group))
         if not candidates.size:

@@ -81,13 +81,29 @@ def one_ring(graph):
     return sp.csr_matrix((np.ones(indices.size, dtype=np.int8), indices, indptr), shape=(u, u))
 
 
-def one_ring_average(ring, rows):
+def one_ring_average(ring, rows, local=None):
     """(r, r) float64 CSR: the rows ``rows`` (r,) sorted ids of the average of each vertex and its
     one-ring neighbours, equal weights (``ring``: :func:`one_ring`), restricted to the columns
-    ``rows``: each kept entry of row i is 1 / (the size of i's whole one-ring)."""
-    sub = ring[rows][:, rows]
-    data = np.repeat(1.0 / np.diff(ring.indptr)[rows].astype(np.float64), np.diff(sub.indptr))
-    return sp.csr_matrix((data, sub.indices, sub.indptr), shape=sub.shape)
+    ``rows``: each kept entry of row i is 1 / (the size of i's whole one-ring). ``local``: a
+    (u,) int scratch array of -1 the caller keeps (given back as it came: no array as long as the
+    mesh is made per call)."""
+    u = ring.shape[0]
+    scratch = np.full(u, -1, dtype=np.int64) if local is None else local
+    scratch[rows] = np.arange(rows.size)
+    starts, stops = ring.indptr[rows], ring.indptr[rows + 1]
+    counts = stops - starts
+    positions = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    columns = scratch[ring.indices[positions]]
+    scratch[rows] = -1
+    inside = columns >= 0
+    kept = np.add.reduceat(inside, np.cumsum(counts) - counts) if rows.size else np.zeros(0, dtype=np.int64)
+    kept[counts == 0] = 0
+    indptr = np.zeros(rows.size + 1, dtype=np.int64)
+    np.cumsum(kept, out=indptr[1:])
+    data = np.repeat(1.0 / counts.astype(np.float64), kept)
+    # Each row's columns keep the ring's order (descending ids, as a row slice and a column
+    # slice of the ring kept them: the order the diffusion adds its terms up in).
+    return sp.csr_matrix((data, columns[inside], indptr), shape=(rows.size, rows.size))
 
 
 def one_ring_rows(ring, start, stop):
@@ -123,6 +139,7 @@ class SeamWeights:
         self._frames = frames
         self._ring = one_ring(graph)
         self._widest = None
+        self._local = None
         self._free = None
         #: The associations of the islands of recent layouts (:meth:`layout_associations`).
         self._islands = OrderedDict()
@@ -169,7 +186,7 @@ class SeamWeights:
         u = self._u
         base = self._base_of(rows)
         if rows.size < u:
-            blocks = [one_ring_average(self._ring, rows)]
+            blocks = [one_ring_average(self._ring, rows, self._scratch())]
         else:  # the whole mesh (the build's free diffusion): row blocks multiplied side by side
             bounds = np.linspace(0, u, (threads.WORKERS if u >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
             blocks = [one_ring_rows(self._ring, a, b) for a, b in zip(bounds[:-1], bounds[1:])]
@@ -364,7 +381,7 @@ class SeamWeights:
         keep = carried_free
         own = self._carriers(groups, inside) == labels[inside]
         keep[inside[own]] = True
-        elsewhere = np.full(self._u, -1, dtype=np.int64)
+        elsewhere = np.full(self._u, -1, dtype=np.int32)
         elsewhere[inside[~own]] = labels[inside[~own]]
         rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest_of,
                          np.asarray(groups), elsewhere)
@@ -374,14 +391,7 @@ class SeamWeights:
     def _islands_of(self, ids, keep, held_rows):
         """The associations of the rows ``ids`` (sorted welded ids) of a layout, island by island
         (the connected parts of those rows, see :meth:`layout_associations`), grouped by vertex."""
-        local = np.full(self._u, -1, dtype=np.int64)
-        local[ids] = np.arange(ids.size)
-        rows = self._ring[ids]
-        columns = local[rows.indices]
-        inside = columns >= 0
-        owner = np.repeat(np.arange(ids.size), np.diff(rows.indptr))[inside]
-        count, label = connected_components(sp.csr_matrix((np.ones(owner.size, dtype=np.int8), (owner, columns[inside])),
-                                                          shape=(ids.size, ids.size)), directed=False)
+        count, label = connected_components(one_ring_average(self._ring, ids, self._scratch()), directed=False)
         order = np.argsort(label, kind="stable")
         bounds = np.concatenate([[0], np.cumsum(np.bincount(label, minlength=count))])
         islands = [ids[order[a:b]] for a, b in zip(bounds[:-1], bounds[1:])]  # each sorted (ids are)
@@ -410,6 +420,12 @@ class SeamWeights:
                                        shape=(span[1] - span[0], u)) @ unmarked,
             list(zip(bounds[:-1], bounds[1:]))))
         return np.flatnonzero(marked & (counts > 0))
+
+    def _scratch(self):
+        """(u,) int64 of -1, kept for :func:`one_ring_average` (which gives it back so)."""
+        if self._local is None:
+            self._local = np.full(self._u, -1, dtype=np.int64)
+        return self._local
 
     def _widest_ring(self):
         """The most vertices in one one-ring (made once)."""

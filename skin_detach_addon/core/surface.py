@@ -183,6 +183,8 @@ class SkinDetachedSurface:
         self._seams_lock = threading.Lock()
         self._free_lock = threading.Lock()
         self._free_job = None
+        self._layout_lock = threading.RLock()
+        self._layout_jobs = set()
         #: (fraction done, stage) of the free rebuild while it is being made, else None.
         self.free_progress = None
 
@@ -228,7 +230,7 @@ class SkinDetachedSurface:
     def _held_labels(self, held):
         """(u,) group of each welded detail vertex from ``held`` (pairs (group label, detail ids)),
         -1 where none; a later pair overrides an earlier one."""
-        labels = np.full(self.skin.case.shape[0], -1, dtype=np.int64)
+        labels = np.full(self.skin.case.shape[0], -1, dtype=np.int32)
         for label, ids in held:
             if np.size(ids):  # a pair a later one took whole holds nothing
                 labels[self.weld[as_vertex_ids("held ids", ids, self.n_detail)]] = int(label)
@@ -336,14 +338,15 @@ class SkinDetachedSurface:
         matrix up without a pass over the detail)."""
         if groups is None:
             return self._free_rebuild()
-        self._layout = layout_of(self._layout, groups, held or [])
-        key = self._layout.key()
-        if key not in self._rebuilds:
-            layouts = [known for known in self._rebuilds if known is not None]
-            if len(layouts) >= 2:
-                self._rebuilds.pop(layouts[0])
-            self._rebuilds[key] = self._layout_rebuild(groups, held)
-        return self._rebuilds[key]
+        with self._layout_lock:  # one thread makes a layout; another asking for it waits
+            self._layout = layout_of(self._layout, groups, held or [])
+            key = self._layout.key()
+            if key not in self._rebuilds:
+                layouts = [known for known in self._rebuilds if known is not None]
+                if len(layouts) >= 2:
+                    self._rebuilds.pop(layouts[0])
+                self._rebuilds[key] = self._layout_rebuild(groups, held)
+            return self._rebuilds[key]
 
     def drop_rows(self, selections, groups=None):
         """One (k_i, m) CSR per detail ids ``selections[i]`` (k_i,): row r the drop point of
@@ -538,14 +541,51 @@ class SkinDetachedSurface:
         rebuild = self._rebuild_for(groups, held)
         return rebuild(points, out=out) if groups is None else rebuild(points, out=out, place=place)
 
-    def prepare_layout(self, groups=None, held=None, float32=False):
+    def prepare_layout(self, groups=None, held=None, float32=False, background=False):
         """Prepare the rebuild of a layout (``groups``, ``held`` as for :meth:`reconstruct`) now, so
         that the first :meth:`reconstruct` with it finds its matrix ready (the last two layouts
         prepared or used are kept); ``float32``: also the float32 copy a float32 ``out`` uses
-        (:meth:`.reconstruction.Rebuild.float32_blocks`)."""
-        rebuild = self._rebuild_for(*self._checked_layout(groups, held))
-        if float32:
-            rebuild.float32_blocks()
+        (:meth:`.reconstruction.Rebuild.float32_blocks`). ``background``: on a background thread
+        (:func:`.threads.start_background`; a rebuild asking for the layout meanwhile waits for
+        it, and makes it again, raising, if it failed there)."""
+        checked = self._checked_layout(groups, held)
+
+        def prepare():
+            rebuild = self._rebuild_for(*checked)
+            if float32:
+                rebuild.float32_blocks()
+
+        if not background:
+            prepare()
+            return
+
+        def job():
+            try:
+                prepare()
+            except Exception:  # noqa: BLE001 (made again, and raised, where it is needed)
+                pass
+            finally:
+                self._layout_jobs.discard(thread)
+
+        thread = threads.start_background(job, "skin_detach_layout")
+        self._layout_jobs.add(thread)
+
+    def finish_preparing(self):
+        """Wait for what background threads make for this surface (its free rebuild, made now if
+        nothing makes it; its layouts' rebuilds)."""
+        self.prepare_free_rebuild(background=False, float32=True)
+        for job in list(self._layout_jobs):
+            job.join()
+
+    @property
+    def preparing(self):
+        """(fraction done, stage) of what a background thread is making for this surface (its free
+        rebuild, a layout's rebuild), or None."""
+        if self.free_progress is not None or (self._free_job is not None and self._free_job.is_alive()):
+            return self.free_progress or (0.0, "diffusing the skin")
+        if any(job.is_alive() for job in list(self._layout_jobs)):
+            return (0.5, "preparing the layout")
+        return None
 
     def _checked_layout(self, groups, held):
         """(``groups`` as (m,) int64 or None, ``held`` as a list of pairs or None), refused unless
