@@ -76,6 +76,7 @@ def test_the_carrier_takes_the_narrowest_signed_type_of_its_range():
     ({"carrier": "short"}, "carrier: expected ("),
     ({"proxy_faces": np.array([0, 1, 99999], dtype=np.int32)}, "proxy_faces"),
     ({"proxy_vertices": np.array([np.nan, 0.0, 0.0])}, "proxy_vertices"),
+    ({"proxy_vertices": "far"}, "proxy_vertices: expected points within 10 diagonals"),
     ({"stats": np.array("{not json")}, "malformed data"),
     ({"stats": np.array("[1]")}, "build figures as a JSON object"),
     ({"fingerprint": np.array("0")}, "expected the detail topology it was built from"),
@@ -90,6 +91,9 @@ def test_a_damaged_compact_record_is_refused_naming_the_field(damage, expected):
         elif isinstance(value, str) and value == "big":
             arrays[key] = arrays[key].copy()
             arrays[key][3] = built.proxy_vertices.shape[0]
+        elif isinstance(value, str) and value == "far":
+            arrays[key] = arrays[key].copy()
+            arrays[key][2, 1] = 1e300
         elif isinstance(value, str) and value == "short":
             arrays[key] = arrays[key][:-1]
         else:

@@ -20,7 +20,7 @@ import numpy as np
 from .errors import SkinDetachError
 from .geometry import half_edge_graph
 from .prepared_mesh import prepare_mesh
-from .skin import bind_skin
+from .skin import bind_skin, check_coefficients
 from .surface import SkinDetachedSurface, topology_fingerprint
 from .validation import as_points, as_triangles
 
@@ -29,6 +29,9 @@ COMPACT_TAG = "skin_detach_compact_surface"
 COMPACT_VERSION = 1
 #: Integer types a carrier may be stored in, narrowest first.
 CARRIER_TYPES = (np.int8, np.int16, np.int32)
+#: A proxy vertex lies within this many diagonals of the detail's bounding box (the build's do,
+#: simplified from it); one farther is a damaged record.
+PROXY_REACH = 10.0
 #: Share of :func:`surface_from_compact`'s time each stage ends at (measured at 3.2M vertices).
 STAGES = (("welding the mesh", 0.45), ("binding the skin", 1.0))
 
@@ -74,6 +77,12 @@ def surface_from_compact(arrays, points, triangles, source="arrays", progress=No
     if topology_fingerprint(points.shape[0], faces) != fingerprint:
         raise SkinDetachError(f"{source}: expected the detail topology it was built from, got another "
                               f"({points.shape[0]} vertices, {faces.shape[0]} triangles); rebuild the skin")
+    low, high = points.min(axis=0), points.max(axis=0)
+    reach = PROXY_REACH * max(float(np.linalg.norm(high - low)), 1e-300)
+    if ((proxy_vertices < low - reach) | (proxy_vertices > high + reach)).any():
+        raise SkinDetachError(f"{source} proxy_vertices: expected points within {PROXY_REACH:g} diagonals of the "
+                              f"detail mesh's bounding box, got some as far as "
+                              f"{float(np.abs(proxy_vertices).max()):.3g}; rebuild the skin")
     report(0.0, STAGES[0][0])
     mesh = prepare_mesh(points, faces)
     u = mesh.points.shape[0]
@@ -82,6 +91,7 @@ def surface_from_compact(arrays, points, triangles, source="arrays", progress=No
                               f"{carrier.shape}; rebuild the skin")
     report(STAGES[0][1], STAGES[1][0])
     skin, _ = bind_skin(mesh.points, mesh.normals, carrier, proxy_vertices, proxy_faces)
+    check_coefficients(skin, source)
     surface = SkinDetachedSurface(proxy_vertices, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
     edges = mesh.graph
     if mesh.degenerate.size:  # as the build gives them: every face's edges, dropped ones too

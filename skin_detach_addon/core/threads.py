@@ -10,6 +10,7 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: release the GIL): the rebuild's, the diffusion's.
 PARALLEL_MIN_ROWS = 100_000
 _POOL = None
+_BACKGROUND = None
 
 
 def pool():
@@ -21,8 +22,12 @@ def pool():
 
 
 def shutdown():
-    """Stop the pool's threads (after the work given to them); the next :func:`pool` makes a new one."""
-    global _POOL
+    """Stop the background thread and the pool's threads (after the work given to them); the
+    next :func:`pool` or :func:`background` makes new ones."""
+    global _POOL, _BACKGROUND
+    if _BACKGROUND is not None:
+        _BACKGROUND.shutdown(wait=True)
+        _BACKGROUND = None
     if _POOL is not None:
         _POOL.shutdown(wait=True)
         _POOL = None
@@ -33,3 +38,14 @@ def map_blocks(function, blocks):
     if len(blocks) <= 1 or WORKERS == 1:
         return [function(block) for block in blocks]
     return [done.result() for done in [pool().submit(function, block) for block in blocks]]
+
+
+def background(function, *args):
+    """Run ``function(*args)`` on the one background thread, after what was given to it before
+    (the work of an opened file, one mesh at a time, while Blender's main thread answers events);
+    returns its :class:`concurrent.futures.Future`. The function uses numpy and scipy only: they
+    release the GIL in their loops, so the main thread runs beside it."""
+    global _BACKGROUND
+    if _BACKGROUND is None:
+        _BACKGROUND = ThreadPoolExecutor(max_workers=1, thread_name_prefix="skin_detach_background")
+    return _BACKGROUND.submit(function, *args)
