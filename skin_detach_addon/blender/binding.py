@@ -404,8 +404,9 @@ class Opening:
         self._triangles = None
         preview = None
         if PREVIEW_PREFIX + "format_tag" in arrays:
-            preview = Preview.from_arrays({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
-                                           if key.startswith(PREVIEW_PREFIX)}, source=f"preview of {self.name!r}")
+            source = f"preview of {self.name!r}"
+            preview = Preview.from_arrays(_unpacked({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
+                                                     if key.startswith(PREVIEW_PREFIX)}, source), source=source)
         if prepare:
             self.fraction, self.stage = 0.5, "diffusing the skin"
             surface.prepare_layout()
