@@ -54,6 +54,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 
 from bench import blender_stack
 from bench.arap import arap_reference
+from bench.file_figures import file_figures
 from bench.meshes import SIZES, blender_mesh, subdivided
 from bench.quality import bend_quality
 from bench.scale_tables import tables
@@ -277,7 +278,8 @@ def large_row(spec, steps):
     return {"size": size, "vertices": int(points.shape[0]), "build_s": bound["build_s"],
             "build_peak_mb_added": bound["build_peak_mb_added"], "preview_vertices": stats.get("preview_vertices", 0),
             "proxy_faces": stats["proxy_faces"], "build_stages_s": stats["seconds"], "drags": drags,
-            "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb()}
+            "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb(),
+            "files": file_figures(obj)}  # last: it opens files (bench/file_figures.py)
 
 
 def run_one(spec, steps):
