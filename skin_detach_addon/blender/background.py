@@ -13,6 +13,7 @@ import bpy
 from ..core import threads
 from ..core.errors import SkinDetachError
 from . import binding as stored
+from . import handle_symmetry, handles
 from .deformation import Deformation
 
 #: Share of the progress the making of the binding stands for (the layout's preparation the rest).
@@ -31,6 +32,7 @@ class Preparation:
         self.started = time.perf_counter()
         self._opening = stored.begin_opening(obj)  # reads the record and the mesh here
         self._future = None
+        self._layout = False
         self._fraction, self.stage = 0.0, "reading"
 
     @property
@@ -56,20 +58,45 @@ class Preparation:
                 return False
             self._opening = None
             stored.open_binding(obj)  # takes what the background made: cached, an old record rewritten
-        if self._future is None:
+        if self._future is None:  # the symmetry checks the layout's reading asks for, made in the background
+            binding = stored.open_binding(obj)
+            self._future = binding.busy = threads.background(_own_images, binding, _asked_images(obj, binding))
+            self.stage = "symmetry"
+            return False
+        if not self._future.done():
+            return False
+        self._future.result()
+        if not self._layout:
+            self._layout = True
             binding = stored.open_binding(obj)
             work = Deformation(obj, self.preserve_volume, require_unedited=False).preparation()
             if work is None:
                 return True
             self._future = binding.busy = threads.background(work, self._report)
             return False
-        if not self._future.done():
-            return False
-        self._future.result()
         return True
 
     def _report(self, fraction, stage):
         self._fraction, self.stage = fraction, stage
+
+
+def _asked_images(obj, binding):
+    """Pairs (detail ids, axis) that :func:`.handle_symmetry.symmetry_axis` may ask
+    :meth:`.binding.Binding.is_own_mirror_image` about for ``obj``'s handles (each answered yes,
+    so none is skipped): reading them is quick, answering them is not (1.4 s at 1M vertices)."""
+    asked = []
+
+    def record(ids, axis):
+        asked.append((ids, axis))
+        return True
+    handle_symmetry.symmetry_axis(obj, handles.handles_of(obj, binding.proxy), record)
+    return asked
+
+
+def _own_images(binding, asked):
+    """Answer each of ``asked`` (:func:`_asked_images`) into the binding's cache."""
+    for ids, axis in asked:
+        binding.is_own_mirror_image(ids, axis)
 
 
 def begin(obj, preserve_volume=True):

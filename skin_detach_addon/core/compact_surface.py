@@ -84,7 +84,7 @@ def surface_from_compact(arrays, points, triangles, source="arrays", progress=No
                               f"detail mesh's bounding box, got some as far as "
                               f"{float(np.abs(proxy_vertices).max()):.3g}; rebuild the skin")
     report(0.0, STAGES[0][0])
-    mesh = prepare_mesh(points, faces)
+    mesh = prepare_mesh(points, faces, components=False)  # scipy's labelling holds the GIL: not needed
     u = mesh.points.shape[0]
     if carrier.shape != (u,):
         raise SkinDetachError(f"{source} carrier: expected ({u},) (one per welded detail vertex), got "
