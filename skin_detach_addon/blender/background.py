@@ -57,9 +57,8 @@ class Preparation:
             if not self._opening.done():
                 return False
             self._opening = None
-            stored.open_binding(obj)  # takes what the background made: cached, an old record rewritten
         if self._future is None:  # the symmetry checks the layout's reading asks for, made in the background
-            binding = stored.open_binding(obj)
+            binding = stored.open_binding(obj)  # takes what the background made: cached, an old record rewritten
             self._future = binding.busy = threads.background(_own_images, binding, _asked_images(obj, binding))
             self.stage = "symmetry"
             return False
