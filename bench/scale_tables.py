@@ -84,6 +84,9 @@ def large(rows):
 
 
 def files(rows):
+    rows = [r for r in rows if "files" in r]  # rows of results written before the file figures: none
+    if not rows:
+        return ""
     return ("\n### The bound file\n\nThe rigged mesh of each row saved and opened (bpy's open_mainfile) with its binding, "
             "then without it (plain: the rig and the record removed); after opening, the seconds until it is "
             "prepared (the skin bound again and the layout prepared on the background thread, polled every 50 ms) "
@@ -95,8 +98,7 @@ def files(rows):
                 ("open s (x plain)", lambda r: f"{r['files']['open_s']:.2f} ({r['files']['open_x']:.2f})"),
                 ("plain open s", lambda r: f"{r['files']['plain_open_s']:.2f}"),
                 ("prepared after open s", lambda r: f"{r['files']['prepared_s']:.2f}"),
-                ("main thread held max ms", lambda r: f"{r['files']['main_thread_max_ms']:.0f}")],
-                [r for r in rows if "files" in r]))
+                ("main thread held max ms", lambda r: f"{r['files']['main_thread_max_ms']:.0f}")], rows))
 
 
 def tables(figures):
