@@ -1,6 +1,7 @@
 """Writes tests/data/schema1_rig.blend: a rig bound by the add-on as it was at commit 185f42b
 (binding schema 1: the whole skin stored). Run with that commit's add-on on the path:
-    git worktree add /tmp/old 185f42b && cd /tmp/old && .venv/bin/python THIS_FILE OUT.blend
+    git worktree add /tmp/old 185f42b && cd /tmp/old && PYTHONPATH=. .venv42/bin/python THIS_FILE OUT.blend
+(bpy 4.2: Blender 4.2 cannot read a file that 5.x wrote, 5.x reads 4.2 files)
 A box of 6x6x6 cells with one vertex split into an exact duplicate, a zero-area face and a
 loose little sheet beside it; an anchor on its bottom, a handle on its top, raised and deformed."""
 
