@@ -92,8 +92,26 @@ def large(rows):
                 ("peak MB", lambda r: f"{r['peak_mb']:.0f}")], rows))
 
 
+def files(rows):
+    rows = [r for r in rows if "files" in r]  # rows of results written before the file figures: none
+    if not rows:
+        return ""
+    return ("\n### The bound file\n\nThe rigged mesh of each row saved and opened (bpy's open_mainfile) with its binding, "
+            "then without it (plain: the rig and the record removed); after opening, the seconds until it is "
+            "prepared (the skin bound again and the layout prepared on the background thread, polled every 50 ms) "
+            "and the longest the main thread was held meanwhile.\n\n" + table([
+                ("vertices", lambda r: f"{r['vertices']:,}"),
+                ("save s", lambda r: f"{r['files']['save_s']:.2f}"),
+                (".blend MB (x plain)", lambda r: f"{r['files']['blend_mb']:.0f} ({r['files']['size_x']:.2f})"),
+                ("plain MB", lambda r: f"{r['files']['plain_mb']:.0f}"),
+                ("open s (x plain)", lambda r: f"{r['files']['open_s']:.2f} ({r['files']['open_x']:.2f})"),
+                ("plain open s", lambda r: f"{r['files']['plain_open_s']:.2f}"),
+                ("prepared after open s", lambda r: f"{r['files']['prepared_s']:.2f}"),
+                ("main thread held max ms", lambda r: f"{r['files']['main_thread_max_ms']:.0f}")], rows))
+
+
 def tables(figures):
     """The tables of every part in ``figures`` (dict: "table1", "side", "large" -> rows)."""
     return ((table1(figures["table1"]) if figures.get("table1") else "") +
             "".join(side(row) for row in figures.get("side", [])) +
-            (large(figures["large"]) if figures.get("large") else ""))
+            (large(figures["large"]) + files(figures["large"]) if figures.get("large") else ""))

@@ -54,6 +54,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))  # the r
 
 from bench import blender_stack
 from bench.arap import arap_reference
+from bench.file_figures import file_figures
 from bench.meshes import SIZES, blender_mesh, subdivided
 from bench.quality import bend_quality
 from bench.scale_tables import tables
@@ -302,7 +303,8 @@ def large_row(spec, steps):
             "build_peak_mb_added": build_peak, "preview_vertices": stats.get("preview_vertices", 0),
             "proxy_faces": stats["proxy_faces"], "build_stages_s": stats["seconds"], "anchor_s": anchor_s,
             "handle_s": handle_s, "drags": drags, "deform_s": deform_s,
-            "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb()}
+            "drag_peak_mb_added": peak_mb() - after_build, "peak_mb": peak_mb(),
+            "files": file_figures(obj)}  # last: it opens files (bench/file_figures.py)
 
 
 def run_one(spec, steps):

@@ -18,7 +18,7 @@ the expected and the actual value; nothing is written when it raises.
 
 import numpy as np
 
-from .blender import baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, skin_rig
+from .blender import background, baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, skin_rig
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
@@ -34,7 +34,7 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "bake_file_path", "shutdown", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
+           "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
            "handle_mirror", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
@@ -104,6 +104,15 @@ def finish_preparing(obj):
     """Wait until what :func:`preparing` reports is done (or make it now when nothing is making
     it): the next full-detail rebuild then starts at once."""
     stored.open_binding(_bound(obj)).surface.finish_preparing()
+
+
+def prepare_in_background(obj, preserve_volume=True):
+    """Start :func:`prepare` of ``obj`` (and the making of its binding, after a file is opened) on
+    a background thread; returns a :class:`.blender.background.Preparation` whose ``poll()``, called
+    from a timer on the main thread, advances it and returns True once done (raising what failed),
+    with ``fraction`` (0 to 1) and ``stage`` for a progress display. A step asked for meanwhile
+    waits for it. The add-on does this for every bound mesh after a file is opened."""
+    return background.begin(_bound(obj), preserve_volume)
 
 
 def _prepare_after_change(obj):

@@ -1,6 +1,7 @@
 """Adversarial cases (headless bpy, small meshes): each is refused with SkinDetachError and leaves
 every mesh in the file bit-identical, or works and writes only finite, documented results."""
 
+import re
 import subprocess
 import sys
 
@@ -58,17 +59,29 @@ def test_a_handle_moved_absurdly_far_writes_nothing(rigged):
     assert np.isfinite(meshes()[obj.data.name]).all()
 
 
-@pytest.mark.parametrize("field, value", [("skin_weight", np.nan), ("skin_height", np.inf), ("skin_bary", 1e300)])
-def test_crafted_skin_coefficients_are_refused(rigged, field, value):
+@pytest.mark.parametrize("field, value, expected", [
+    ("proxy_vertices", np.nan, "proxy_vertices"), ("proxy_vertices", 1e300, "proxy_vertices"),
+    ("carrier", 10_000, "carrier: expected proxy vertex ids in [-1, "), ("carrier", -2, "carrier: expected proxy"),
+    ("carrier_type", "float64", "carrier: expected bytes of one of"), ("carrier", b"\x01", "carrier: expected bytes")])
+def test_crafted_stored_arrays_are_refused(rigged, field, value, expected):
     obj, handle = rigged
-    stored = np.array(binding.arrays_of(obj)[field])
-    stored[0] = value
-    del binding.arrays_of(obj)[field]
-    binding.arrays_of(obj)[field] = stored
+    group = binding.arrays_of(obj) if field in binding.arrays_of(obj) else obj[binding.KEY]
+    stored = group[field]
+    if isinstance(stored, bytes) and not isinstance(value, bytes):
+        carrier = np.frombuffer(stored, dtype=obj[binding.KEY]["carrier_type"]).copy()
+        carrier[0] = value
+        stored = carrier.tobytes()
+    elif hasattr(stored, "typecode"):
+        stored = np.array(stored)
+        stored[0] = value
+    else:
+        stored = value
+    del group[field]
+    group[field] = stored
     reload_binding()
     handle.location.x += 0.1
-    refused(lambda: api.deform(obj), f"binding of 'spot'.*{field}")
-    refused(lambda: api.reset(obj), f"binding of 'spot'.*{field}")
+    refused(lambda: api.deform(obj), "binding of 'spot'.*" + re.escape(expected))
+    refused(lambda: api.reset(obj), "binding of 'spot'.*" + re.escape(expected))
 
 
 def test_crafted_rest_and_data_of_the_wrong_kind_are_refused(rigged):
@@ -84,7 +97,7 @@ def test_crafted_rest_and_data_of_the_wrong_kind_are_refused(rigged):
     reload_binding()
     refused(lambda: api.reset(obj), "stored rest positions")
     obj[binding.KEY]["stats"] = "{not json"
-    binding.arrays_of(obj)["skin_face"] = np.array([1, 2], dtype=np.int32)
+    binding.arrays_of(obj)["proxy_faces"] = np.array([1, 2], dtype=np.int32)
     reload_binding()
     refused(lambda: api.deform(obj), "binding of 'spot'")
     assert api.figures(obj)["build"] == {}  # the panel's figures still read

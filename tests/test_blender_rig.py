@@ -62,8 +62,11 @@ def test_binding_is_stored_without_int64_or_pickles(scene):
     for key, value in list(props.items()) + list(binding.arrays_of(obj).items()):
         if hasattr(value, "typecode"):
             assert value.typecode in "ifd", key
+        elif isinstance(value, bytes):                         # a narrow integer array, its type beside it
+            assert props[key + binding.TYPE_SUFFIX] in ("int8", "int16"), key
         else:
             assert isinstance(value, (int, str, float)) or key in ("proxy", "settings", binding.STORE), key
+    assert props["schema_version"] == 2 and not set(binding.WHOLE_SKIN_KEYS) & set(props.keys())
 
 
 def test_the_bindings_arrays_live_on_a_text_datablock_that_goes_with_the_binding(scene):

@@ -3,6 +3,8 @@ non-finite handle transform and a damaged stored record each refused with a Skin
 names the object and the field (nothing written), the timers of Live Update and of the idle
 preparation never dying of them, and messages that give the values as they are."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -235,9 +237,10 @@ def test_the_idle_preparation_skips_a_damaged_mesh_once_and_prepares_the_others(
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "two.blend"))
     assert idle_preparation.queued() == ["a_damaged", "b_good"]
-    for _ in range(5):                                         # the timer's ticks, until it stops itself
+    for _ in range(2000):                                      # the timer's ticks, until it stops itself
         if idle_preparation.prepare_next() is None:
             break
+        time.sleep(0.005)
     assert not idle_preparation.queued()
     said = capsys.readouterr().out
     assert said.count("a_damaged not prepared") == 1, said
@@ -252,15 +255,22 @@ def test_the_idle_preparation_survives_an_internal_error(scene, monkeypatch, cap
     second, _ = _rigged("b_second")
     prepared = []
 
+    class Done:
+        def __init__(self, name):
+            self.name = name
+
+        def poll(self):
+            prepared.append(self.name)
+            return True
+
     def prepare(obj, preserve_volume=True):
         if obj.name == "a_first":
             raise IndexError("index 487 is out of bounds")
-        prepared.append(obj.name)
+        return Done(obj.name)
 
-    monkeypatch.setattr(api, "prepare", prepare)
+    monkeypatch.setattr(api, "prepare_in_background", prepare)
     idle_preparation._queue[:] = ["a_first", "b_second"]
-    assert idle_preparation.prepare_next() == 0.0             # the timer goes on
-    assert idle_preparation.prepare_next() is None
+    assert idle_preparation.prepare_next() is None            # went on to the next mesh, then stopped
     assert prepared == ["b_second"]
     assert "internal error IndexError" in idle_preparation.FAILED["a_first"]
 

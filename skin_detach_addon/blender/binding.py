@@ -1,20 +1,30 @@
 """The binding of a mesh object, stored in the object's ID properties so it lives in the .blend.
 
 Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom
-Properties panel): the schema version, a binding id, the mesh's topology fingerprint, the
-digest of the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest
-positions (3n float32, the mesh's own vertex order) and the core surface's arrays (float64 or
-int32, flattened). Nothing is pickled or evaluated. The core objects rebuilt from it are cached
-per binding id, so undo and reload find them again or rebuild them from the properties.
+Properties panel), schema 2: the schema version, a binding id, the mesh's topology fingerprint,
+the digest of the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest
+positions (3n float32, the mesh's own vertex order) and what of the core surface cannot be
+recomputed quickly (:func:`.core.compact_surface.compact_arrays`: the proxy, the carrier in the
+narrowest integer type its range allows, stored as bytes because Blender's ID-property arrays
+hold int32 at the narrowest, the build figures), plus the preview's arrays whole (float64 or
+int32, flattened). Opening makes the skin again from the rest positions, the mesh's triangles
+and the carrier (:func:`.core.compact_surface.surface_from_compact`), bit for bit the one the
+build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
+once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
+id, so undo and reload find them again or rebuild them from the properties; after a file is
+opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
+that needs one before then waits for it.
 What reads or changes the record for one purpose has its own module: the preview standing in
 for the mesh (:mod:`.preview_stand_in`), the figures the panel shows (:mod:`.binding_figures`).
 """
 
+import concurrent.futures
 import uuid
 
 import numpy as np
 
 from ..core import threads
+from ..core.compact_surface import compact_arrays, surface_from_compact
 from ..core.errors import SkinDetachError
 from ..core.surface import BACKGROUND_ABOVE, Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
@@ -38,8 +48,18 @@ PROXY_TAG = "_skin_detach_proxy_of"
 PREVIEW_TAG = "_skin_detach_preview_of"
 #: Stored arrays of the preview's skin carry this prefix.
 PREVIEW_PREFIX = "preview_"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: The schema whose records store the whole skin: read as they are and rewritten compact once.
+WHOLE_SKIN_SCHEMA = 1
+#: An integer array narrower than int32 is stored as bytes under its key, its type under the key
+#: with this suffix (one of :data:`NARROW_TYPES`).
+TYPE_SUFFIX = "_type"
+NARROW_TYPES = {"int8": np.int8, "int16": np.int16}
+#: Keys of a schema-1 record that schema 2 does not keep.
+WHOLE_SKIN_KEYS = ("skin_vertex", "skin_face", "skin_bary", "skin_height", "skin_weight", "skin_case", "weld")
 _CACHE = {}
+#: Openings under way on the background thread, by binding id (:class:`Opening`).
+_PENDING = {}
 
 
 class Binding:
@@ -74,6 +94,9 @@ class Binding:
         self._diagonal = None
         self.mesh_guard = MeshGuard()
         self._stretch = None
+        #: The Future of a preparation of this binding running on the background thread, or None
+        #: (:mod:`.background`); :func:`open_binding` waits for it before anything uses the binding.
+        self.busy = None
 
     def stretch(self, proxy_vertices):
         """(n,) float32 the detail's stretch against its rest when the proxy is at
@@ -200,12 +223,16 @@ def has_binding(obj):
 
 def _flat_props(arrays, prefix=""):
     """(key, ID-property value) of each entry of a core ``to_arrays`` dict, made as it is asked
-    for: strings, scalars, int32 or float64 flat arrays."""
+    for: strings, scalars, int32 or float64 flat arrays, and an int8 or int16 array as its bytes
+    (its type under the key with :data:`TYPE_SUFFIX`)."""
     for key, value in arrays.items():
         if value.dtype.kind in "US":
             yield prefix + key, str(value)
         elif value.ndim == 0:
             yield prefix + key, value.item()
+        elif value.dtype.name in NARROW_TYPES:
+            yield prefix + key + TYPE_SUFFIX, value.dtype.name
+            yield prefix + key, np.ascontiguousarray(value).ravel().tobytes()
         elif value.dtype.kind in "iu":
             yield prefix + key, value.astype(np.int32).ravel()
         else:
@@ -228,23 +255,35 @@ def store(obj, surface, rest, proxy, preview=None):
     forget(obj)
     obj[KEY] = props
     group = obj[KEY]
-    side = bpy.data.texts.new(f"{STORE_PREFIX}{obj.name}")
-    side.user_clear()  # its one user: the record's pointer (deleting the record frees it on save)
-    side[KEY] = {"rest": rest}
-    group[STORE] = side
-    arrays = side[KEY]
-    # The arrays one at a time: each int32 copy goes once Blender holds its own (at 3.2M the
-    # copies of all of them at once added 60 MB to the peak of a build).
-    entries = [_flat_props(surface.to_arrays())]
+    arrays = _new_store(obj, group)
+    arrays["rest"] = rest
+    # The arrays one at a time: each copy goes once Blender holds its own.
+    entries = [_flat_props(compact_arrays(surface))]
     if preview is not None:
         group["preview"] = preview
         entries.append(_flat_props(surface.preview.to_arrays(), PREVIEW_PREFIX))
     for key, value in (entry for part in entries for entry in part):
-        (arrays if isinstance(value, np.ndarray) else group)[key] = value
+        (arrays if _is_array(value) else group)[key] = value
     binding = Binding(props["binding_id"], surface, rest.reshape(-1, 3), proxy,
                       surface.preview if preview is not None else None)
     _CACHE[binding.binding_id] = binding
     return binding
+
+
+def _is_array(value):
+    """Whether a stored value goes to the record's text datablock (:data:`STORE`): arrays and bytes."""
+    return isinstance(value, (np.ndarray, bytes)) or hasattr(value, "typecode")
+
+
+def _new_store(obj, group):
+    """A new text datablock for the arrays of ``obj``'s record ``group``, pointed at from it under
+    :data:`STORE`; returns its (empty) property group."""
+    import bpy
+    side = bpy.data.texts.new(f"{STORE_PREFIX}{obj.name}")
+    side.user_clear()  # its one user: the record's pointer (deleting the record frees it on save)
+    side[KEY] = {}
+    group[STORE] = side
+    return side[KEY]
 
 
 def arrays_of(obj):
@@ -282,8 +321,9 @@ def _stored(obj):
     return props
 
 
-def open_binding(obj):
-    """:class:`Binding` of ``obj`` after checking that it still fits the mesh and the proxy exists.
+def _checked_record(obj):
+    """(the stored property group, binding id, proxy object) of ``obj`` after checking that the
+    record is of a schema this version reads and still fits the mesh, and that the proxy exists.
     Raises :class:`SkinDetachError` that says to rebuild when it does not."""
     if obj is None or obj.type != 'MESH':
         raise SkinDetachError(f"object: expected a mesh object, got {_describe(obj)}")
@@ -292,7 +332,11 @@ def open_binding(obj):
     check_editable(obj)
     props = _stored(obj)
     version = props.get("schema_version", -1)
-    if version != SCHEMA_VERSION:
+    if isinstance(version, int) and version > SCHEMA_VERSION:
+        raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {WHOLE_SKIN_SCHEMA} to "
+                              f"{SCHEMA_VERSION} (this version of Skin Detach), got {version}: the file was bound by "
+                              f"a newer Skin Detach; update the add-on, or press Rebuild to bind it again here")
+    if version not in (WHOLE_SKIN_SCHEMA, SCHEMA_VERSION):
         raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {SCHEMA_VERSION}, got {version}; "
                               f"press Rebuild")
     if obj.mode == 'EDIT' or obj.data.is_editmode:
@@ -300,11 +344,11 @@ def open_binding(obj):
                               f"never writes a mesh under Edit Mode)")
     if not obj.users_scene:
         raise SkinDetachError(f"object {obj.name!r}: expected it in a scene, it was unlinked from every scene")
-    n = len(obj.data.vertices)
     fingerprint = mesh_io.mesh_fingerprint(obj.data)
     if fingerprint != props.get("mesh_fingerprint"):
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected the topology it was bound with, the mesh was "
-                              f"edited after binding (now {n} vertices, or its faces changed); press Rebuild")
+                              f"edited after binding (now {len(obj.data.vertices)} vertices, or its faces changed); "
+                              f"press Rebuild")
     binding_id = props.get("binding_id")
     if not isinstance(binding_id, str) or not binding_id:
         raise SkinDetachError(f"object {obj.name!r}: expected a binding id, got {binding_id!r}; press Rebuild")
@@ -319,31 +363,190 @@ def open_binding(obj):
     check_editable(proxy, "proxy")
     if proxy.mode == 'EDIT' or proxy.data.is_editmode:
         raise SkinDetachError(f"proxy {proxy.name!r}: expected Object Mode, it is in Edit Mode; leave Edit Mode first")
+    return props, binding_id, proxy
+
+
+def open_binding(obj):
+    """:class:`Binding` of ``obj`` after checking that it still fits the mesh and the proxy exists.
+    Raises :class:`SkinDetachError` that says to rebuild when it does not. A binding not yet made
+    in this session is made now (or, when the background thread is making it, waited for, the
+    window's progress shown); a record of schema 1 is rewritten compact (schema 2) once, said on
+    the console. A preparation of the binding running in the background is waited for."""
+    props, binding_id, proxy = _checked_record(obj)
     binding = _CACHE.get(binding_id)
     if binding is None:
+        opening = _PENDING.get(binding_id)
+        if opening is None or opening.name != obj.name:
+            opening = Opening(obj, props, binding_id)
+        try:
+            surface, preview = opening.made()
+        finally:
+            _PENDING.pop(binding_id, None)
+        binding = Binding(binding_id, surface, opening.rest, proxy, preview)
+        if opening.version == WHOLE_SKIN_SCHEMA:
+            _rewrite_compact(obj, surface)
+        _CACHE[binding.binding_id] = binding
+    if binding.busy is not None:
+        _wait(binding.busy, lambda: 0.5)  # its error, if any, is the background preparation's to report
+        binding.busy = None
+    binding.proxy = proxy  # never keep a Blender reference across undo or reload
+    return binding
+
+
+def begin_opening(obj):
+    """Start making the :class:`Binding` of ``obj`` on the background thread (its record and mesh
+    read here, checked as :func:`open_binding` checks them); returns the :class:`Opening`, or None
+    when the binding is made already. :func:`open_binding` finishes it on the main thread."""
+    props, binding_id, _ = _checked_record(obj)
+    if binding_id in _CACHE:
+        return None
+    opening = _PENDING.get(binding_id)
+    if opening is None or opening.name != obj.name:
+        opening = _PENDING[binding_id] = Opening(obj, props, binding_id)
+        opening.start()
+    return opening
+
+
+class Opening:
+    """Making the core side of one stored binding. Made on the main thread, it reads what it needs
+    from Blender (the record's arrays, the rest positions, the mesh's triangles; copies); then
+    :meth:`make` uses numpy and scipy only, so it may run on the background thread (:meth:`start`).
+
+    name      the object's name
+    version   the record's schema version
+    rest      (n, 3) float32 rest positions (checked)
+    fraction  how far :meth:`make` got, 0 to 1, and ``stage``, what it does
+    """
+
+    def __init__(self, obj, props, binding_id):
+        self.name = obj.name
+        self.binding_id = binding_id
+        self.version = props["schema_version"]
         stored_arrays = arrays_of(obj)
         if stored_arrays is None:
             raise SkinDetachError(f"binding of {obj.name!r}: expected its arrays in the text datablock its record "
                                   f"points at, it was deleted or damaged; press Rebuild")
-        arrays = {key: np.asarray(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
-                  for source in (props, stored_arrays) for key, value in source.items()
-                  if key not in ("proxy", "preview", STORE)}
-        surface = SkinDetachedSurface.from_arrays(
-            {key: value for key, value in arrays.items() if not key.startswith(PREVIEW_PREFIX)},
-            source=f"binding of {obj.name!r}")
-        surface.attach_topology(mesh_io.read_triangles(obj.data))  # the topology was checked above
+        self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
+                        if key not in ("proxy", "preview", STORE)}
+        self.rest = np.array(_checked_rest(obj, stored_arrays, len(obj.data.vertices)))  # its own, not Blender's
+        self._triangles = mesh_io.read_triangles(obj.data)
+        self.fraction, self.stage = 0.0, "reading"
+        self._future = None
+
+    def start(self):
+        """Run :meth:`make` (with the free rebuilds prepared) on the background thread."""
+        self._future = threads.background(self.make, True)
+
+    def done(self):
+        return self._future is None or self._future.done()
+
+    def made(self):
+        """(surface, preview or None): the background's when started (waited for), else made now."""
+        if self._future is None:
+            return self.make()
+        return _wait(self._future, lambda: self.fraction)
+
+    def _report(self, low, high):
+        def report(fraction, stage):
+            self.fraction, self.stage = low + (high - low) * fraction, stage
+        return report
+
+    def make(self, prepare=False):
+        """(:class:`SkinDetachedSurface` over the mesh, its :class:`Preview` or None) from what was
+        read; with ``prepare``, their free rebuilds made too (what the first rebuild would pay)."""
+        source = f"binding of {self.name!r}"
+        arrays = self._arrays
+        main = {key: value for key, value in arrays.items() if not key.startswith(PREVIEW_PREFIX)}
+        n = self.rest.shape[0]
+        if self.version == WHOLE_SKIN_SCHEMA:
+            surface = SkinDetachedSurface.from_arrays(main, source=source)
+            if surface.n_detail != n:
+                raise SkinDetachError(f"{source}: expected a skin over the mesh's {n} vertices, got "
+                                      f"{surface.n_detail}; press Rebuild")
+            surface.attach_topology(self._triangles)  # the topology was checked
+        else:
+            surface = surface_from_compact(_unpacked(main, source), self.rest, self._triangles, source,
+                                           self._report(0.0, 0.5 if prepare else 1.0))
+        self._triangles = None
         preview = None
         if PREVIEW_PREFIX + "format_tag" in arrays:
-            preview = Preview.from_arrays({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
-                                           if key.startswith(PREVIEW_PREFIX)}, source=f"preview of {obj.name!r}")
-        rest = _checked_rest(obj, stored_arrays, n)
-        if surface.n_detail != n:
-            raise SkinDetachError(f"binding of {obj.name!r}: expected a skin over the mesh's {n} vertices, got "
-                                  f"{surface.n_detail}; press Rebuild")
-        binding = Binding(binding_id, surface, rest, proxy, preview)
-        _CACHE[binding.binding_id] = binding
-    binding.proxy = proxy  # never keep a Blender reference across undo or reload
-    return binding
+            source = f"preview of {self.name!r}"
+            preview = Preview.from_arrays(_unpacked({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
+                                                     if key.startswith(PREVIEW_PREFIX)}, source), source=source)
+        if prepare:
+            self.fraction, self.stage = 0.5, "diffusing the skin"
+            surface.prepare_layout()
+            if preview is not None:
+                self.fraction, self.stage = 0.95, "diffusing the preview's skin"
+                preview.surface.prepare_layout()
+        self.fraction, self.stage = 1.0, "done"
+        return surface, preview
+
+
+def _copied(props, key):
+    """The stored value under ``key``: an array copied out of Blender (the background thread reads
+    it after the main thread goes on), a string, bytes or a number as they are."""
+    value = props[key]
+    if hasattr(value, "__len__") and not isinstance(value, (str, bytes)):
+        return np.array(value)
+    return value
+
+
+def _unpacked(arrays, source):
+    """``arrays`` with each array stored as bytes (:func:`_flat_props`) read back in its type."""
+    out = {key: value for key, value in arrays.items() if not key.endswith(TYPE_SUFFIX)}
+    for key in [key for key in arrays if key.endswith(TYPE_SUFFIX)]:
+        name, packed = arrays[key], arrays.get(key[:-len(TYPE_SUFFIX)])
+        kind = NARROW_TYPES.get(name) if isinstance(name, str) else None
+        if kind is None or not isinstance(packed, bytes) or len(packed) % np.dtype(kind).itemsize:
+            raise SkinDetachError(f"{source} {key[:-len(TYPE_SUFFIX)]}: expected bytes of one of "
+                                  f"{sorted(NARROW_TYPES)}, got {type(packed).__name__} of type {name!r}; press Rebuild")
+        out[key[:-len(TYPE_SUFFIX)]] = np.frombuffer(packed, dtype=kind)
+    return out
+
+
+def _wait(future, fraction):
+    """The result of ``future``, waited for with the window's progress shown (``fraction()``: 0 to
+    1) when it is not done yet."""
+    if future.done():
+        return future.result()
+    import bpy
+    manager = getattr(bpy.context, "window_manager", None)
+    if manager is not None:
+        manager.progress_begin(0, 100)
+    try:
+        while True:
+            try:
+                return future.result(timeout=0.1)
+            except concurrent.futures.TimeoutError:
+                if manager is not None:
+                    manager.progress_update(int(100 * fraction()))
+    finally:
+        if manager is not None:
+            manager.progress_end()
+
+
+def _rewrite_compact(obj, surface):
+    """Rewrite ``obj``'s schema-1 record compact (schema 2): the whole skin goes, the carrier and the
+    proxy are stored as :func:`store` stores them; the figures, rest and preview stay as they are."""
+    group = obj[KEY]
+    arrays = arrays_of(obj)
+    for key in WHOLE_SKIN_KEYS:
+        group.pop(key, None)
+        arrays.pop(key, None)
+    if arrays is group:  # arrays on the object (185f42b and before): to a text datablock of their own
+        moved = {key: _copied(group, key) for key in list(group.keys()) if _is_array(group[key])
+                 and key != "written_matrix"}
+        for key in moved:
+            del group[key]
+        arrays = _new_store(obj, group)
+        for key, value in moved.items():
+            arrays[key] = value
+    for key, value in _flat_props(compact_arrays(surface)):
+        (arrays if _is_array(value) else group)[key] = value
+    group["schema_version"] = SCHEMA_VERSION
+    print(f"Skin Detach: {obj.name}: binding of schema version {WHOLE_SKIN_SCHEMA} rewritten compact "
+          f"(schema {SCHEMA_VERSION}); save the file to keep it so")
 
 
 def _checked_rest(obj, props, n):

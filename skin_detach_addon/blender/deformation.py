@@ -117,17 +117,33 @@ class Deformation:
         are read, nothing is moved or written). Without handles there is nothing to prepare:
         anchors alone hold the mesh at rest and nothing can be dragged (at 300K, preparing the
         anchors' layout was half of the set-up)."""
+        work = self.preparation()
+        if work is not None:
+            work()
+
+    def preparation(self):
+        """:meth:`prepare` in two: the handles read here, then the returned callable (None: nothing
+        to prepare) does the numpy work, touching no Blender data (it may run on another thread);
+        ``work(report)``, if given ``report(fraction, stage)``, says how far it got."""
         empties = self.handles()
         if not any(handles.kind_of(empty) == handles.HANDLE for empty in empties):
-            return
+            return None
         axis, _ = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)
-        if axis:
-            self.binding.mirror_map(axis)
         ids, _, layout, _ = self._constraints(empties)
         if ids.size == 0:
-            return
-        self.binding.solves.prepare(ids, self.preserve_volume, layout)
-        self.binding.prepare(layout)
+            return None
+        binding, preserve_volume = self.binding, self.preserve_volume
+
+        def work(report=lambda fraction, stage: None):
+            if axis:
+                report(0.0, "mirror map")
+                binding.mirror_map(axis)
+            report(0.1, "factoring the solver")
+            binding.solves.prepare(ids, preserve_volume, layout)
+            report(0.3, "preparing the rebuild")
+            binding.prepare(layout)
+            report(1.0, "done")
+        return work
 
     def _rebuild(self, axis, result, layout, motions):
         """The detail of a solve: on a symmetric rig of a symmetric mesh made exactly symmetric

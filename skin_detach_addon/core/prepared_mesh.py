@@ -168,8 +168,9 @@ def _faces_diagonal(points, triangles, diagonal):
     return diagonal if used.all() else bbox_diagonal(points[used])
 
 
-def prepare_mesh(points, triangles):
-    """Weld and clean a validated mesh: ``points`` (n, 3) float64, ``triangles`` (f, 3) int32 or int64."""
+def prepare_mesh(points, triangles, components=True):
+    """Weld and clean a validated mesh: ``points`` (n, 3) float64, ``triangles`` (f, 3) int32 or int64;
+    without ``components`` the labels are not made (None: binding a skin needs none)."""
     diagonal = bbox_diagonal(points)
     weld, representatives = weld_map(points)
     if representatives.size == points.shape[0]:
@@ -200,7 +201,7 @@ def prepare_mesh(points, triangles):
         triangles=kept,
         cross=kept_cross,
         normals=vertex_normals(unique_points, kept, kept_cross),
-        components=component_labels(kept, unique_points.shape[0], graph),
+        components=component_labels(kept, unique_points.shape[0], graph) if components else None,
         graph=graph,
         degenerate=faces[~keep],
         diagonal=diagonal,

@@ -11,11 +11,12 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: release the GIL): the rebuild's, the diffusion's.
 PARALLEL_MIN_ROWS = 100_000
 _POOL = None
-#: Per thread: whether :func:`map_blocks` runs its blocks one after the other (a background job's
+#: Per thread: whether :func:`map_blocks` runs its blocks one after the other (a background
 #: thread: it keeps to one core and never queues the pool behind the artist's work).
 _LOCAL = threading.local()
 #: Background jobs started (:func:`start_background`), waited for by :func:`shutdown`.
 _JOBS = []
+_BACKGROUND = None
 
 
 def pool():
@@ -27,21 +28,30 @@ def pool():
 
 
 def shutdown():
-    """Wait for the background jobs (:func:`start_background`) and stop the pool's threads (after
-    the work given to them); the next :func:`pool` makes a new one."""
-    global _POOL
+    """Wait for the background jobs (:func:`start_background`), stop the background thread and
+    the pool's threads (after the work given to them); the next :func:`pool` or
+    :func:`background` makes new ones."""
+    global _POOL, _BACKGROUND
     while _JOBS:
         _JOBS.pop().join()
+    if _BACKGROUND is not None:
+        _BACKGROUND.shutdown(wait=True)
+        _BACKGROUND = None
     if _POOL is not None:
         _POOL.shutdown(wait=True)
         _POOL = None
+
+
+def _serial():
+    """Make this thread's :func:`map_blocks` calls run their blocks one after the other."""
+    _LOCAL.serial = True
 
 
 def start_background(function, name):
     """Run ``function()`` on a new daemon thread named ``name`` whose :func:`map_blocks` calls run
     in that thread alone; returns the thread."""
     def run():
-        _LOCAL.serial = True
+        _serial()
         function()
 
     thread = threading.Thread(target=run, name=name, daemon=True)
@@ -57,3 +67,15 @@ def map_blocks(function, blocks):
     if len(blocks) <= 1 or WORKERS == 1 or getattr(_LOCAL, "serial", False):
         return [function(block) for block in blocks]
     return [done.result() for done in [pool().submit(function, block) for block in blocks]]
+
+
+def background(function, *args):
+    """Run ``function(*args)`` on the one background thread, after what was given to it before
+    (the work of an opened file, one mesh at a time, while Blender's main thread answers events);
+    returns its :class:`concurrent.futures.Future`. The function uses numpy and scipy only: they
+    release the GIL in their loops, so the main thread runs beside it."""
+    global _BACKGROUND
+    if _BACKGROUND is None:
+        _BACKGROUND = ThreadPoolExecutor(max_workers=1, thread_name_prefix="skin_detach_background",
+                                         initializer=_serial)
+    return _BACKGROUND.submit(function, *args)

@@ -5,7 +5,7 @@ import textwrap
 import bpy
 
 from .. import api
-from .idle_preparation import FAILED
+from .idle_preparation import FAILED, progress_of
 from .live_update import ERRORS
 
 
@@ -120,6 +120,9 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         row = box.row(align=True)
         row.operator("skin_detach.reset", icon='LOOP_BACK')
         row.operator("skin_detach.clear", icon='TRASH')
+        preparing = progress_of(obj.name)
+        if preparing:
+            box.label(text=preparing, icon='TIME')
         for errors in (ERRORS, FAILED):
             if obj.name in errors:
                 wrapped_label(box, errors[obj.name], icon='ERROR')

@@ -1,0 +1,103 @@
+"""Issue 44 (a .blend that does not double): a surface kept as its proxy, carrier, fingerprint and
+figures is made again from the detail mesh bit for bit, and a damaged compact record is refused
+naming the field."""
+
+import numpy as np
+import pytest
+
+from shapes import merge, plane
+from test_core_skin import messy_mesh
+
+from skin_detach_addon.core.compact_surface import compact_arrays, narrowest, surface_from_compact
+from skin_detach_addon.core.errors import SkinDetachError
+from skin_detach_addon.core.surface import SkinDetachedSurface
+
+SKIN = ("vertex", "face", "bary", "height", "weight", "case")
+
+
+def messy_with_loose_part():
+    """The messy box (a duplicate, repeated and zero-area faces, an unused vertex) beside a tiny
+    loose sheet, in float32 as Blender gives them: (points, triangles)."""
+    points, tris, *_ = messy_mesh()
+    sheet, sheet_tris = plane(4, size=0.05)
+    points, tris = merge((points, tris), (sheet + [3.0, 0.0, 0.0], sheet_tris))
+    return points.astype(np.float32), tris.astype(np.int32)
+
+
+def same_surface(made, built):
+    for name in SKIN:
+        assert np.array_equal(getattr(made.skin, name), getattr(built.skin, name)), name
+    for name in ("proxy_vertices", "proxy_faces", "weld", "carrier"):
+        assert np.array_equal(getattr(made, name), getattr(built, name)), name
+    assert made.fingerprint == built.fingerprint and made.stats == built.stats
+
+
+@pytest.mark.parametrize("preview", [None, 3000])
+def test_a_surface_made_from_its_compact_arrays_rebuilds_bit_for_bit(bundled, preview):
+    if preview is None:
+        points, tris = messy_with_loose_part()
+        built = SkinDetachedSurface.build(points, tris, target_faces=60)
+        assert built.stats["welded_duplicates"] and built.stats["dropped_faces"] and built.stats["components"] >= 2
+    else:
+        points, tris = bundled("armadillo")
+        points, tris = points.astype(np.float32), tris.astype(np.int32)
+        built = SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=preview)
+        assert built.preview is not None
+    arrays = compact_arrays(built)
+    assert arrays["carrier"].itemsize <= 2 and arrays["carrier"].shape == built.carrier.shape
+    made = surface_from_compact(arrays, points, tris)
+    same_surface(made, built)
+    rng = np.random.default_rng(4)
+    moved = built.proxy_vertices + rng.normal(scale=0.02, size=built.proxy_vertices.shape)
+    groups = np.full(built.proxy_vertices.shape[0], -1)
+    groups[:5] = 0
+    for layout in ({}, {"groups": groups}, {"groups": groups, "held": [(0, np.arange(10))]}):
+        for out in (None, np.empty((points.shape[0], 3), dtype=np.float32)):
+            a = built.reconstruct(moved, out=None if out is None else out.copy(), **layout)
+            b = made.reconstruct(moved, out=None if out is None else out.copy(), **layout)
+            assert np.array_equal(a, b)
+
+
+def test_the_carrier_takes_the_narrowest_signed_type_of_its_range():
+    assert narrowest([-1, 5], -1, 126).dtype == np.int8
+    assert narrowest([-1, 5], -1, 127).dtype == np.int8
+    assert narrowest([-1, 5], -1, 128).dtype == np.int16
+    assert narrowest([-1, 5], -1, 40_000).dtype == np.int32
+    with pytest.raises(SkinDetachError, match="within int32"):
+        narrowest([0], -1, 2**31)
+
+
+@pytest.mark.parametrize("damage, expected", [
+    ({"format_tag": np.array("other")}, "expected format_tag"),
+    ({"format_version": np.array(7)}, "expected compact format version 1, got 7"),
+    ({"carrier": None}, "expected arrays ['carrier'], they are missing"),
+    ({"carrier": np.array([0.5])}, "carrier: expected a flat array of signed integers"),
+    ({"carrier": "big"}, "carrier: expected proxy vertex ids in [-1, "),
+    ({"carrier": "short"}, "carrier: expected ("),
+    ({"proxy_faces": np.array([0, 1, 99999], dtype=np.int32)}, "proxy_faces"),
+    ({"proxy_vertices": np.array([np.nan, 0.0, 0.0])}, "proxy_vertices"),
+    ({"proxy_vertices": "far"}, "proxy_vertices: expected points within 10 diagonals"),
+    ({"stats": np.array("{not json")}, "malformed data"),
+    ({"stats": np.array("[1]")}, "build figures as a JSON object"),
+    ({"fingerprint": np.array("0")}, "expected the detail topology it was built from"),
+])
+def test_a_damaged_compact_record_is_refused_naming_the_field(damage, expected):
+    points, tris = messy_with_loose_part()
+    built = SkinDetachedSurface.build(points, tris, target_faces=60)
+    arrays = compact_arrays(built)
+    for key, value in damage.items():
+        if value is None:
+            del arrays[key]
+        elif isinstance(value, str) and value == "big":
+            arrays[key] = arrays[key].copy()
+            arrays[key][3] = built.proxy_vertices.shape[0]
+        elif isinstance(value, str) and value == "far":
+            arrays[key] = arrays[key].copy()
+            arrays[key][2, 1] = 1e300
+        elif isinstance(value, str) and value == "short":
+            arrays[key] = arrays[key][:-1]
+        else:
+            arrays[key] = value
+    with pytest.raises(SkinDetachError) as caught:
+        surface_from_compact(arrays, points, tris, source="binding of 'box'")
+    assert expected in str(caught.value) and "binding of 'box'" in str(caught.value), str(caught.value)
