@@ -534,7 +534,7 @@ def _rewrite_compact(obj, surface):
     for key in WHOLE_SKIN_KEYS:
         group.pop(key, None)
         arrays.pop(key, None)
-    if arrays is group:  # arrays on the object (185f42b and before): to a text datablock of their own
+    if STORE not in group:  # arrays on the object (185f42b and before): to a text datablock of their own
         moved = {key: _copied(group, key) for key in list(group.keys()) if _is_array(group[key])
                  and key != "written_matrix"}
         for key in moved:
