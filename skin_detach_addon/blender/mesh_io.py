@@ -164,8 +164,13 @@ def write_point_floats(mesh, name, values):
 
 def stretch_colors(stretch):
     """(n, 4) float32 colours of (n,) ``stretch``: blue at 0, red at :data:`STRETCH_FULL` or more."""
-    share = np.clip(np.asarray(stretch, dtype=np.float32) / STRETCH_FULL, 0.0, 1.0)
-    return np.stack([share, np.full_like(share, 0.15), 1.0 - share, np.ones_like(share)], axis=1)
+    stretch = np.asarray(stretch, dtype=np.float32)
+    out = np.empty((stretch.shape[0], 4), dtype=np.float32)
+    out[:, 1], out[:, 3] = 0.15, 1.0  # columns written in place: a stack of four columns cost a 3.2M confirm 0.3 s
+    np.multiply(stretch, np.float32(1.0 / STRETCH_FULL), out=out[:, 0])
+    np.clip(out[:, 0], 0.0, 1.0, out=out[:, 0])
+    np.subtract(np.float32(1.0), out[:, 0], out=out[:, 2])
+    return out
 
 
 def stretch_shown(mesh):
