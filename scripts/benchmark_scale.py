@@ -290,6 +290,7 @@ def large_row(spec, steps):
             timed = time.perf_counter()
             empty = api.add_handle(obj, middle)
             added = time.perf_counter() - timed
+        bpy.context.view_layer.update()  # what came before is evaluated, as a window's redraw does before a drag
         moves, confirm, stretch = modal_drag(api.DragSession(obj, empty, view, (0, 0), preview_above=preview_above),
                                              steps)
         drags.append({"drag": name, "handles_s": added, "first_move_ms": 1000 * moves[0],

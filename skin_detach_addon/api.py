@@ -24,14 +24,14 @@ from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
 from .blender import drag_session
 from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession, moved_matrix
-from .blender.skin_rig import PREVIEW_ABOVE
+from .blender.skin_rig import PREVIEW_ABOVE, BuildCancelled, BuildJob
 from .core import threads
 from .core.errors import SkinDetachError
 from .core.held_detail import held_proxy_vertices
 from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
-__all__ = ["SkinDetachError", "build", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
+__all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
@@ -65,7 +65,22 @@ def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above
 
     A mesh of more than ``preview_above`` vertices (None: never) also gets a preview: a hidden
     object of about 60,000 vertices bound to the same proxy, which :class:`DragSession` (and
-    :func:`deform` with ``preview=True``) shows in place of the mesh while handles move."""
+    :func:`deform` with ``preview=True``) shows in place of the mesh while handles move.
+
+    The same as :func:`start_build`, ``job.run(progress)`` and :func:`finish_build` in a row."""
+    job = start_build(obj, target_faces, normal_test, preview_above)
+    job.run(progress)
+    return finish_build(job)
+
+
+def start_build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE):
+    """:func:`build` in parts, for a caller that keeps a window answering while the core works
+    (the Build button): reads ``obj``'s mesh (main thread, writing nothing) and returns its
+    :class:`BuildJob`. ``job.run(progress)`` runs the core's build on any thread (``job.start()``:
+    on a thread of its own; ``job.done``, ``job.fraction``, ``job.stage`` tell how far it got;
+    ``job.cancel()`` stops it at its next stage), then :func:`finish_build` writes every object
+    on the main thread, or none. Where the preview stands in for the mesh, the pose it shows is
+    what is bound (solved here, written into the mesh by :func:`finish_build`)."""
     if preview_above is not None and (isinstance(preview_above, bool) or not isinstance(preview_above, (int, np.integer))
                                       or preview_above < 0):
         raise SkinDetachError(f"preview_above: expected None or a vertex count >= 0, got {preview_above!r}")
@@ -73,10 +88,19 @@ def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above
     skin_rig.check_mesh_object(obj)
     if obj.mode == 'EDIT' or obj.data.is_editmode:
         raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
-    _write_shown_pose(obj)  # a Rebuild binds the pose the artist sees
-    stats = skin_rig.build(obj, target_faces, normal_test, preview_above, progress)
+    return BuildJob(obj, target_faces, normal_test, preview_above, _shown_pose(obj))
+
+
+def finish_build(job):
+    """Write what the :class:`BuildJob` ``job`` built (main thread, after ``job.run`` or once
+    ``job.done``): the binding, the proxy and preview objects, the handles carried over, then
+    prepares their layout (see :func:`prepare`); returns the build figures (see :func:`build`).
+    Raises, writing nothing, when the build failed, was cancelled (:class:`BuildCancelled`) or
+    the mesh was changed, deleted or put in Edit Mode since :func:`start_build` read it."""
+    import bpy
+    stats = job.finish()
     if stats["handles_kept"]:
-        _prepare_after_change(obj)
+        _prepare_after_change(bpy.data.objects[job.name])
     return stats
 
 
@@ -257,6 +281,18 @@ def before_save():
     registers it): a drag that writes the mesh as it goes records what it wrote, so the saved
     file holds the pose with its digest."""
     drag_session.before_save()
+
+
+def _shown_pose(obj):
+    """(n, 3) float32 the pose the preview shows where it stands in for ``obj`` (solved, nothing
+    written), else None; where that cannot be solved the mesh is shown again and the error raised."""
+    if not preview_stand_in.preview_stands_in(obj):
+        return None
+    try:
+        return Deformation(obj).solve(follow=True)[1].copy()
+    except SkinDetachError:
+        preview_stand_in.end_stand_in(obj)
+        raise
 
 
 def _write_shown_pose(obj):

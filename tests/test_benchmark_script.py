@@ -51,6 +51,7 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
     assert 0 < settle["stretch_s"] < settle["settle_s"]  # the stretch attribute was written, and timed
     large = figures["large"][0]
     assert large["vertices"] == 49990 and all(d["move_ms"] > 0 for d in large["drags"])
+    assert all(d["first_move_ms"] > 0 for d in large["drags"])
     assert [d["drag"] for d in large["drags"]] == ["first drag", "same handle again", "second handle"]
     assert [d["handles_s"] is None for d in large["drags"]] == [False, True, False]  # Add Handle timed
     assert all(0 < d["stretch_s"] < d["confirm_s"] for d in large["drags"])

@@ -1,7 +1,10 @@
 """The rig around a bound mesh: building the binding and its proxy object, handles from a
 selection, the stretch map, and clearing it all. The mesh's positions are only read here, never
-written (only the stretch map's attributes, see :func:`show_stretch`).
+written (only the stretch map's attributes, see :func:`show_stretch`, and a build's pose shown by
+the preview, see :class:`BuildJob`).
 """
+
+import threading
 
 import numpy as np
 from mathutils import Matrix
@@ -12,7 +15,7 @@ from ..core.held_detail import held_proxy_vertices
 from ..core.surface import SkinDetachedSurface
 from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
-from . import handle_symmetry, handles, mesh_io
+from . import handle_symmetry, handles, mesh_io, preview_stand_in
 
 #: The collection of each scene that holds its rigs (proxies, previews, handles). Not named after
 #: the add-on: F3 "skin detach" would list "Add > Collection Instance > Skin Detach" first (a
@@ -114,21 +117,146 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     object, about :data:`PREVIEW_VERTICES` vertices (an eighth of the mesh at most) bound to the same proxy, which drags show
     instead of the detail (and the build simplifies through it: much faster at millions).
     A previous binding is replaced: its proxy goes, handles made from detail vertices are
-    carried over to the new proxy (back at rest), handles made from proxy vertices are removed."""
-    check_mesh_object(obj)
+    carried over to the new proxy (back at rest), handles made from proxy vertices are removed.
+    The three parts of a :class:`BuildJob`, one after the other."""
+    job = BuildJob(obj, target_faces, normal_test, preview_above)
+    job.run(progress)
+    return job.finish()
+
+
+class BuildCancelled(Exception):
+    """A :class:`BuildJob` was cancelled: nothing was written."""
+
+
+class BuildJob:
+    """One build of :func:`build` in three parts, so that a window can go on answering while the
+    core works: made on the main thread (reads the mesh: positions (n, 3) float32, triangles
+    (t, 3) int32), :meth:`run` on any thread (the core's build; touches no Blender data, reports
+    :attr:`fraction` and :attr:`stage` as it goes; :meth:`start` runs it on a thread of its own),
+    :meth:`finish` on the main thread (checks that the mesh is still what was read, then writes
+    every object, or raises having written none). :meth:`cancel` stops it at the core's next
+    stage; nothing is written then.
+
+    ``positions``: (n, 3) float32 to bind instead of the mesh's own (the pose the preview shows
+    where it stands in for the mesh, see ``api.start_build``); :meth:`finish` writes them into the
+    mesh first."""
+
+    def __init__(self, obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, positions=None):
+        check_mesh_object(obj)
+        mesh = obj.data
+        self.name, self._pointer = obj.name, obj.as_pointer()
+        held = mesh_io.read_positions(mesh)
+        self._read = (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(held))
+        self.shown_pose = positions is not None
+        self.positions = held if positions is None else np.ascontiguousarray(positions, dtype=np.float32)
+        mesh_io.check_positions(f"mesh {mesh.name!r}", self.positions)
+        self.triangles = mesh_io.read_triangles(mesh)
+        self.target_faces, self.normal_test = target_faces, normal_test
+        self.preview_vertices = None
+        n = self.positions.shape[0]
+        # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets none.
+        if preview_above is not None and n > preview_above and n // 8 >= MIN_PREVIEW_VERTICES:
+            self.preview_vertices = min(PREVIEW_VERTICES, n // 8)
+        #: How far the core's build got (0 to 1) and the name of its current stage.
+        self.fraction, self.stage = 0.0, "waiting"
+        self.surface = None
+        #: What the core's build raised on its thread (given by :meth:`finish`), or None.
+        self.error = None
+        self._cancel = threading.Event()
+        self._thread = None
+        self._progress = None
+
+    def cancel(self):
+        """Stop at the core's next stage (:meth:`run` then raises :class:`BuildCancelled`); a
+        cancelled job never writes."""
+        self._cancel.set()
+
+    @property
+    def cancelled(self):
+        return self._cancel.is_set()
+
+    def _report(self, fraction, stage):
+        if self._cancel.is_set():
+            raise BuildCancelled(f"the build of {self.name!r} was cancelled at {stage!r}")
+        self.fraction, self.stage = float(fraction), stage
+        if self._progress is not None:
+            self._progress(fraction, stage)
+
+    def run(self, progress=None):
+        """The core's build of the mesh read (any thread: no Blender data is touched);
+        ``progress(fraction, stage)`` is called as it goes. Raises :class:`SkinDetachError` (a mesh
+        that cannot be bound) or :class:`BuildCancelled`."""
+        self._progress = progress
+        # float32 as read: the core's float64 copy is its own, gone before the diffusion (77 MB at 3.2M).
+        self.surface = SkinDetachedSurface.build(self.positions, self.triangles, target_faces=self.target_faces,
+                                                 normal_test=self.normal_test,
+                                                 preview_vertices=self.preview_vertices, progress=self._report)
+        self.triangles = None  # the surface holds what it needs of them
+        self._report(1.0, "writing the binding")
+
+    def start(self):
+        """:meth:`run` on a thread of its own (see :attr:`done`, :attr:`error`)."""
+        self._thread = threading.Thread(target=self._run_on_thread, name=f"skin_detach build {self.name}",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run_on_thread(self):
+        try:
+            self.run()
+        except BuildCancelled:
+            pass
+        except BaseException as exc:  # noqa: BLE001 (handed to finish(), on the main thread)
+            self.error = exc
+
+    @property
+    def done(self):
+        """The thread of :meth:`start` has ended (built, failed or cancelled)."""
+        return self._thread is not None and not self._thread.is_alive()
+
+    def wait(self, timeout=None):
+        """Wait for the thread of :meth:`start` (at most ``timeout`` seconds); returns :attr:`done`."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        return self.done
+
+    def _object(self):
+        """The mesh object read, checked to hold what was read (else :class:`SkinDetachError`)."""
+        import bpy
+        obj = bpy.data.objects.get(self.name)
+        if obj is None or obj.as_pointer() != self._pointer:
+            raise SkinDetachError(f"object {self.name!r}: expected the mesh object being bound, it was deleted or "
+                                  f"renamed during the build (nothing was written); press Build again")
+        check_mesh_object(obj)
+        if obj.mode == 'EDIT' or obj.data.is_editmode:
+            raise SkinDetachError(f"object {obj.name!r}: expected Object Mode to write the binding, it is in Edit "
+                                  f"Mode (nothing was written); leave Edit Mode and press Build again")
+        mesh = obj.data
+        if (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(mesh_io.read_positions(mesh))) != self._read:
+            raise SkinDetachError(f"mesh {mesh.name!r}: expected the mesh the build read, it was changed during the "
+                                  f"build (nothing was written); press Build again")
+        return obj
+
+    def finish(self):
+        """Write the binding, the proxy (and preview) objects, carry the handles over (main
+        thread): all of it or, raising, nothing. Returns the build stats (see :func:`build`)."""
+        if self.error is not None:
+            raise self.error
+        if self.cancelled:
+            raise BuildCancelled(f"the build of {self.name!r} was cancelled")
+        if self.surface is None:
+            raise SkinDetachError(f"object {self.name!r}: expected a finished build to write, the build has not run")
+        obj = self._object()
+        surface, positions = self.surface, self.positions
+        self.surface = self.positions = None  # written once
+        if self.shown_pose:  # the pose the preview showed becomes the mesh's, and the mesh is shown again
+            mesh_io.write_positions(obj.data, positions, checked=True)
+            preview_stand_in.end_stand_in(obj)
+        return _write_build(obj, surface, positions)
+
+
+def _write_build(obj, surface, positions):
+    """Replace ``obj``'s binding by the core ``surface`` of its (n, 3) ``positions`` (see :func:`build`)."""
     mesh = obj.data
-    positions = mesh_io.read_positions(mesh)
-    mesh_io.check_positions(f"mesh {mesh.name!r}", positions)
-    triangles = mesh_io.read_triangles(mesh)
-    preview_vertices = None
-    # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets none.
-    if preview_above is not None and positions.shape[0] > preview_above and \
-            positions.shape[0] // 8 >= MIN_PREVIEW_VERTICES:
-        preview_vertices = min(PREVIEW_VERTICES, positions.shape[0] // 8)
-    # float32 as read: the core's float64 copy is its own, gone before the diffusion (77 MB at 3.2M).
-    surface = SkinDetachedSurface.build(positions, triangles, target_faces=target_faces,
-                                        normal_test=normal_test, preview_vertices=preview_vertices,
-                                        progress=progress)
     old = []  # (empty, its detail ids or None, its mirror axis): read before anything changes
     for empty in handles.handles_of(obj):
         try:

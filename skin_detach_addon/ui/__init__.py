@@ -22,6 +22,7 @@ def register():
 
 
 def unregister():
+    operators.cancel_builds()
     menus.unregister()
     stretch_shading.unregister()
     saving.unregister()

@@ -1,5 +1,6 @@
 """Operators: collect, call, write, report. Every SkinDetachError becomes one ERROR report in
-:meth:`_Operator.execute` / :meth:`DragOperator.invoke`, and nothing has been written by then."""
+:meth:`_Operator.execute` / the drag's and the build's ``invoke`` and ``modal``, and nothing has
+been written by then."""
 
 import bpy
 from mathutils import Euler
@@ -62,8 +63,43 @@ class _BoundOperator(_Operator):
         return bound_owner(context) is not None
 
 
+#: Seconds between the TIMER events that poll a build running on its thread.
+BUILD_POLL_S = 0.1
+#: Builds running on their threads: the bound mesh's name -> its api.BuildJob (the panel shows them).
+BUILDS = {}
+#: Events a running build lets through to the window (the view still orbits, pans and zooms, and
+#: redraws); every other key and click waits, Esc cancels.
+_NAVIGATION_PREFIXES = ("TIMER", "MOUSE", "INBETWEEN_MOUSEMOVE", "WHEEL", "TRACKPAD", "NDOF", "WINDOW")
+_NAVIGATION = {"MIDDLEMOUSE", "NONE", "HOME", "NUMPAD_0", "NUMPAD_1", "NUMPAD_2", "NUMPAD_3", "NUMPAD_4", "NUMPAD_5",
+               "NUMPAD_6", "NUMPAD_7", "NUMPAD_8", "NUMPAD_9", "NUMPAD_PERIOD", "NUMPAD_PLUS", "NUMPAD_MINUS",
+               "NUMPAD_SLASH", "NUMPAD_ASTERIX"}
+
+
+def build_report(stats):
+    """The INFO report of a finished build."""
+    kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
+    dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
+    preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
+    return (f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
+            f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
+            f"{stats['case3']:,}){preview}{kept}{dropped}")
+
+
+def build_text(job):
+    """What the panel and the status bar say of a running build: its stage and percent."""
+    return f"{job.stage} {100 * job.fraction:.0f} %"
+
+
+def cancel_builds():
+    """Cancel every running build (unregistering the add-on): nothing is written."""
+    for job in BUILDS.values():
+        job.cancel()
+    BUILDS.clear()
+
+
 class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
-    """Bind the active mesh to a small proxy (replacing any earlier binding)"""
+    """Bind the active mesh to a small proxy (replacing any earlier binding); the window goes on
+    answering while it builds, with its progress in the panel and the status bar (Esc cancels)"""
     bl_idname = "skin_detach.build"
     bl_label = "Build Skin"
     bl_options = {'REGISTER', 'UNDO'}
@@ -78,15 +114,21 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         obj = api.mesh_of(context.active_object)
-        return obj is not None and obj.type == 'MESH'
+        return obj is not None and obj.type == 'MESH' and obj.name not in BUILDS
 
-    def run(self, context):
+    def _settings(self, context):
+        """The mesh to build, Object Mode left, the unset properties given the panel's values."""
         obj = api.mesh_of(context.active_object)
         leave_edit_mode(context)
         settings = context.scene.skin_detach
         for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
             if not self.properties.is_property_set(name):
                 setattr(self, name, getattr(settings, name))
+        return obj, settings
+
+    def run(self, context):
+        """Scripted use and the Redo panel: the whole build at once (the cursor shows its progress)."""
+        obj, settings = self._settings(context)
         wm = context.window_manager
         status = getattr(context, "workspace", None)
 
@@ -104,14 +146,78 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
             wm.progress_end()
             if status is not None:
                 status.status_text_set(None)
-        kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
-        dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
-        preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
-        self.report({'INFO'}, (
-            f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
-            f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
-            f"{stats['case3']:,}){preview}{kept}{dropped}"))
+        self.report({'INFO'}, build_report(stats))
         return {'FINISHED'}
+
+    def invoke(self, context, event):
+        """A press in the window: the core builds on a thread while the window answers (see :meth:`modal`)."""
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        try:
+            obj, settings = self._settings(context)
+            self.job = api.start_build(obj, self.target_faces, self.normal_test, settings.preview_above)
+        except SkinDetachError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        self.job.start()
+        BUILDS[self.job.name] = self.job
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(BUILD_POLL_S, window=context.window)
+        self._writing = False
+        wm.modal_handler_add(self)
+        self._show(context)
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        """Esc cancels (nothing is written); TIMER events show the progress and, once the core is
+        done, write every object (one undo step); the view's navigation passes, other events wait."""
+        job = self.job
+        if event.type == 'ESC' and event.value == 'PRESS':
+            job.cancel()
+            self._end(context)
+            self.report({'INFO'}, f"Skin Detach: build of {job.name} cancelled at {job.stage!r}; nothing changed")
+            return {'CANCELLED'}
+        if event.type == 'TIMER':
+            self._show(context)
+            if job.done:
+                if not self._writing:  # one more redraw: the panel says it writes before the window waits for it
+                    self._writing = True
+                    return {'PASS_THROUGH'}
+                self._end(context)
+                try:
+                    stats = api.finish_build(job)
+                except SkinDetachError as exc:
+                    self.report({'ERROR'}, str(exc))
+                    return {'CANCELLED'}
+                self.report({'INFO'}, build_report(stats))
+                return {'FINISHED'}
+        if event.type in _NAVIGATION or event.type.startswith(_NAVIGATION_PREFIXES):
+            return {'PASS_THROUGH'}
+        return {'RUNNING_MODAL'}
+
+    def _show(self, context):
+        """The build's stage and percent in the status bar, the cursor's progress and the panel."""
+        text = build_text(self.job)
+        context.window_manager.progress_update(int(100 * self.job.fraction))
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"Skin Detach: building {self.job.name}: {text} (Esc cancels)")
+        for area in context.window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+
+    def _end(self, context):
+        BUILDS.pop(self.job.name, None)
+        wm = context.window_manager
+        if getattr(self, "_timer", None) is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+        for area in context.window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
 
 
 class _AddOperator(_BoundOperator):

@@ -7,6 +7,7 @@ import bpy
 from .. import api
 from .idle_preparation import FAILED, progress_of
 from .live_update import ERRORS
+from .operators import BUILDS, build_text
 
 
 #: Characters of a label line that fit the sidebar at its default width beside an icon (about
@@ -52,7 +53,15 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.prop(settings, "normal_test")
         box.prop(settings, "preview_above")
         bound = api.is_bound(obj)
-        box.operator("skin_detach.build", text="Rebuild" if bound else "Build", icon='FILE_REFRESH')
+        job = BUILDS.get(getattr(obj, "name", None))
+        if job is not None:  # the window answers while the core builds: how far it got
+            if hasattr(box, "progress"):
+                box.progress(factor=job.fraction, type='BAR', text=build_text(job))
+            else:
+                box.label(text=build_text(job), icon='TIME')
+            box.label(text="Building (Esc cancels)", icon='TIME')
+        else:
+            box.operator("skin_detach.build", text="Rebuild" if bound else "Build", icon='FILE_REFRESH')
         if obj is None or obj.type != 'MESH':
             layout.label(text="Select a mesh object", icon='INFO')
             return
