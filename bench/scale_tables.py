@@ -71,7 +71,9 @@ def large(rows):
             "confirmed: the first (the bend's anchor and handle), the same handle again, and a second handle added "
             "about the middle (Add Handle prepares its layout; then its layout's first confirm). Per drag, in that "
             "order: the seconds adding its handles, the first and the median move, the moves' 95th percentile, the "
-            "confirm and the stretch attribute's share of it; api.deform after a script moves the last handle."
+            "seconds waited before the confirm for what a background thread still made for the layout (the "
+            "moves here are quicker than an artist's drag), the confirm and the stretch attribute's share of it; "
+            "api.deform after a script moves the last handle."
             "\n\n" + table([
                 ("vertices", lambda r: f"{r['vertices']:,}"), ("proxy faces", lambda r: f"{r['proxy_faces']:,}"),
                 ("preview vertices", lambda r: f"{r['preview_vertices']:,}"),
@@ -85,6 +87,7 @@ def large(rows):
                 (f"first move ms ({DRAGS})", each("first_move_ms", "{:.1f}")),
                 (f"move ms median ({DRAGS})", each("move_ms", "{:.1f}")),
                 (f"move ms p95 ({DRAGS})", each("move_p95_ms", "{:.1f}")),
+                (f"waited s before the confirm ({DRAGS})", each("waited_s", "{:.2f}")),
                 (f"confirm s ({DRAGS})", each("confirm_s", "{:.2f}")),
                 ("stretch % of each confirm", each("stretch_pct", "{:.1f}")),
                 ("api.deform s", lambda r: number(r.get("deform_s"), "{:.2f}")),

@@ -63,7 +63,6 @@ from bench.meshes import blender_mesh, named, subdivide, subdivided  # noqa: E40
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
 
-import skin_detach_addon  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.blender import mesh_io  # noqa: E402
 
@@ -291,8 +290,15 @@ def main():
     parser.add_argument("--busy-rest-ms", type=float, default=300.0)
     parser.add_argument("--json")
     args = parser.parse_args()
-    if not hasattr(bpy.types.Scene, "skin_detach"):
-        skin_detach_addon.register()
+    # The add-on's API is driven unregistered: bpy 4.2's module crashed on exit (SIGSEGV) once the
+    # add-on had been registered, unregistered or not.
+    rows = measure(args)
+    if args.json:
+        report.save(args.json, rows)
+
+
+def measure(args):
+    """Every row of the tables (printed as they are measured), the worst case first."""
     rows = []
     print(f"## Modal drag: R, 90 degrees about the view axis in {args.moves} moves, {args.rest_ms:g} ms of rest "
           f"(TIMER events), then confirm\n")
@@ -325,8 +331,7 @@ def main():
         print(BUSY_HEADER)
         for row in sorted(rows, key=lambda row: -row["busy"]["worst"]):
             print(busy_line(row))
-    if args.json:
-        report.save(args.json, rows)
+    return rows
 
 
 if __name__ == "__main__":

@@ -187,7 +187,7 @@ def test_an_opened_file_is_bound_again_in_the_background_and_a_drag_asked_meanwh
     obj = bpy.data.objects["box"]
     assert idle_preparation.queued() == ["box"]
     assert idle_preparation.prepare_next() == idle_preparation.POLL  # started: made on the background thread
-    assert binding.cached(obj) is None and binding._PENDING
+    assert binding._PENDING or binding.cached(obj) is not None  # under way, or (a quick machine) made
     api.deform(obj)                                            # waits for it, never raises
     assert np.array_equal(mesh_io.read_positions(obj.data), expected)
     for _ in range(2000):
