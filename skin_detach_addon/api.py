@@ -516,8 +516,9 @@ def selected_vertices(context):
 
 def shutdown():
     """Stop the core's worker threads (unregistering the add-on calls it; they start again when
-    next needed)."""
+    next needed) and the handlers that keep mesh fingerprints."""
     threads.shutdown()
+    mesh_io.stop_watching()
 
 
 def frame_list(frames):

@@ -88,6 +88,18 @@ def _watch_geometry():
             handler_list.append(_forget_fingerprints)
 
 
+def stop_watching():
+    """Remove the handlers :func:`_watch_geometry` installed and every kept fingerprint (the
+    add-on's unregister leaves nothing behind)."""
+    import bpy
+    handlers = bpy.app.handlers
+    for handler_list in (handlers.depsgraph_update_post, handlers.undo_post, handlers.redo_post,
+                         handlers.load_post):
+        while _forget_fingerprints in handler_list:
+            handler_list.remove(_forget_fingerprints)
+    _FINGERPRINTS.clear()
+
+
 def _forget_fingerprints(*args):
     """A handler: drop the kept fingerprint of every mesh whose geometry the dependency graph
     update reports changed (every one after an undo, a redo or a file load)."""
