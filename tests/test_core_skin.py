@@ -670,7 +670,7 @@ def test_a_large_meshs_free_rebuild_made_in_the_background_rebuilds_the_same(bun
     groups = np.full(made.proxy_vertices.shape[0], -1)
     groups[:5] = 0
     assert np.array_equal(background.reconstruct(bent, groups=groups), made.reconstruct(bent, groups=groups))
-    job.join()
+    job.result()
     assert background.free_rebuild_ready and background.free_progress is None
     assert np.array_equal(background.reconstruct(bent), made.reconstruct(bent))
     out = np.empty((made.n_detail, 3), dtype=np.float32)

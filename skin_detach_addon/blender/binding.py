@@ -179,7 +179,7 @@ class Binding:
         # it; a confirm may).
         background = self.preview is not None and self.surface.n_detail >= BACKGROUND_ABOVE
         if background and self._stretch is None:
-            threads.start_background(self._skin_stretch, "skin_detach_stretch")
+            threads.background(self._skin_stretch)
         else:
             self._skin_stretch()
         self.surface.prepare_layout(layout.groups, layout.held or None, float32=True, background=background)

@@ -4,6 +4,7 @@
     sds.reconstruct(deformed_proxy (m, 3)) -> (n, 3) detail vertices
 """
 
+import concurrent.futures
 import hashlib
 import json
 import threading
@@ -182,9 +183,10 @@ class SkinDetachedSurface:
         #: (a background job may be making it: :meth:`prepare_free_rebuild`).
         self._seams_lock = threading.Lock()
         self._free_lock = threading.Lock()
+        #: Futures of the free rebuild and of layouts' rebuilds given to the background thread.
         self._free_job = None
         self._layout_lock = threading.RLock()
-        self._layout_jobs = set()
+        self._layout_jobs = []
         #: (fraction done, stage) of the free rebuild while it is being made, else None.
         self.free_progress = None
 
@@ -250,42 +252,31 @@ class SkinDetachedSurface:
                     skin = self._seam_weights().skin(progress=self._free_progressed)
                     check_coefficients(skin, "the diffused skin")
                     self.free_progress = (0.9, "making the rebuild")
-                    rebuild = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
+                    self._rebuilds[None] = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
                     del skin
-                    if float32:
-                        rebuild.float32_blocks()
-                    self._rebuilds[None] = rebuild
                 finally:
                     self.free_progress = None
-            return self._rebuilds[None]
+            rebuild = self._rebuilds[None]
+        if float32:
+            rebuild.float32_blocks()
+        return rebuild
 
     def _free_progressed(self, fraction):
         self.free_progress = (0.7 * fraction, "diffusing the skin")
 
     def prepare_free_rebuild(self, background=None, float32=False):
         """Make the free rebuild (see :meth:`_free_rebuild`) now, or with ``background`` (None: for
-        meshes of :data:`BACKGROUND_ABOVE` welded vertices or more) on a background thread whose
-        work runs on one core (:func:`.threads.start_background`); :attr:`free_progress` says how
-        far it got, :attr:`free_rebuild_ready` when it is done, and whatever needs it meanwhile
-        waits for it (a failure there is raised again by the next call that needs it)."""
+        meshes of :data:`BACKGROUND_ABOVE` welded vertices or more) on the background thread
+        (:func:`.threads.background`, one core); :attr:`free_progress` says how far it got,
+        :attr:`free_rebuild_ready` when it is done, and whatever needs it meanwhile waits for it (a
+        failure there is raised again by the next call that needs it)."""
         if background is None:
             background = self.skin.case.shape[0] >= BACKGROUND_ABOVE and None not in self._rebuilds
         if not background:  # waits for a running job, if any
-            rebuild = self._free_rebuild(float32=float32)
-            if float32:
-                rebuild.float32_blocks()
-            return
-        if None in self._rebuilds or (self._free_job is not None and self._free_job.is_alive()):
-            return
-
-        def job():
-            try:
-                self._free_rebuild(float32=float32)
-            except Exception:  # noqa: BLE001 (made again, and raised, where it is needed)
-                pass
-
-        self.free_progress = (0.0, "diffusing the skin")
-        self._free_job = threads.start_background(job, "skin_detach_free_rebuild")
+            self._free_rebuild(float32=float32)
+        elif None not in self._rebuilds and (self._free_job is None or self._free_job.done()):
+            self.free_progress = (0.0, "diffusing the skin")
+            self._free_job = threads.background(self._free_rebuild, True, float32)
 
     @property
     def free_rebuild_ready(self):
@@ -545,9 +536,9 @@ class SkinDetachedSurface:
         """Prepare the rebuild of a layout (``groups``, ``held`` as for :meth:`reconstruct`) now, so
         that the first :meth:`reconstruct` with it finds its matrix ready (the last two layouts
         prepared or used are kept); ``float32``: also the float32 copy a float32 ``out`` uses
-        (:meth:`.reconstruction.Rebuild.float32_blocks`). ``background``: on a background thread
-        (:func:`.threads.start_background`; a rebuild asking for the layout meanwhile waits for
-        it, and makes it again, raising, if it failed there)."""
+        (:meth:`.reconstruction.Rebuild.float32_blocks`). ``background``: on the background thread
+        (:func:`.threads.background`; a rebuild asking for the layout meanwhile waits for it, and
+        makes it again, raising, if it failed there)."""
         checked = self._checked_layout(groups, held)
 
         def prepare():
@@ -557,33 +548,22 @@ class SkinDetachedSurface:
 
         if not background:
             prepare()
-            return
-
-        def job():
-            try:
-                prepare()
-            except Exception:  # noqa: BLE001 (made again, and raised, where it is needed)
-                pass
-            finally:
-                self._layout_jobs.discard(thread)
-
-        thread = threads.start_background(job, "skin_detach_layout")
-        self._layout_jobs.add(thread)
+        else:  # what it raises stays in its Future: made again, and raised, where it is needed
+            self._layout_jobs = [job for job in self._layout_jobs if not job.done()] + [threads.background(prepare)]
 
     def finish_preparing(self):
         """Wait for what background threads make for this surface (its free rebuild, made now if
         nothing makes it; its layouts' rebuilds)."""
         self.prepare_free_rebuild(background=False, float32=True)
-        for job in list(self._layout_jobs):
-            job.join()
+        concurrent.futures.wait(self._layout_jobs)
 
     @property
     def preparing(self):
         """(fraction done, stage) of what a background thread is making for this surface (its free
         rebuild, a layout's rebuild), or None."""
-        if self.free_progress is not None or (self._free_job is not None and self._free_job.is_alive()):
+        if self.free_progress is not None or (self._free_job is not None and not self._free_job.done()):
             return self.free_progress or (0.0, "diffusing the skin")
-        if any(job.is_alive() for job in list(self._layout_jobs)):
+        if not all(job.done() for job in self._layout_jobs):
             return (0.5, "preparing the layout")
         return None
 

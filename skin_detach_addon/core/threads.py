@@ -11,11 +11,9 @@ WORKERS = max(1, min(4, os.cpu_count() or 1))
 #: release the GIL): the rebuild's, the diffusion's.
 PARALLEL_MIN_ROWS = 100_000
 _POOL = None
-#: Per thread: whether :func:`map_blocks` runs its blocks one after the other (a background
+#: Per thread: whether :func:`map_blocks` runs its blocks one after the other (the background
 #: thread: it keeps to one core and never queues the pool behind the artist's work).
 _LOCAL = threading.local()
-#: Background jobs started (:func:`start_background`), waited for by :func:`shutdown`.
-_JOBS = []
 _BACKGROUND = None
 
 
@@ -28,12 +26,9 @@ def pool():
 
 
 def shutdown():
-    """Wait for the background jobs (:func:`start_background`), stop the background thread and
-    the pool's threads (after the work given to them); the next :func:`pool` or
-    :func:`background` makes new ones."""
+    """Stop the background thread and the pool's threads (after the work given to them); the
+    next :func:`pool` or :func:`background` makes new ones."""
     global _POOL, _BACKGROUND
-    while _JOBS:
-        _JOBS.pop().join()
     if _BACKGROUND is not None:
         _BACKGROUND.shutdown(wait=True)
         _BACKGROUND = None
@@ -47,23 +42,9 @@ def _serial():
     _LOCAL.serial = True
 
 
-def start_background(function, name):
-    """Run ``function()`` on a new daemon thread named ``name`` whose :func:`map_blocks` calls run
-    in that thread alone; returns the thread."""
-    def run():
-        _serial()
-        function()
-
-    thread = threading.Thread(target=run, name=name, daemon=True)
-    _JOBS[:] = [job for job in _JOBS if job.is_alive()]
-    _JOBS.append(thread)
-    thread.start()
-    return thread
-
-
 def map_blocks(function, blocks):
     """``[function(block) for block in blocks]``, run on the pool when there is more than one
-    (one after the other on a background job's thread, see :func:`start_background`)."""
+    (one after the other on the background thread, see :func:`background`)."""
     if len(blocks) <= 1 or WORKERS == 1 or getattr(_LOCAL, "serial", False):
         return [function(block) for block in blocks]
     return [done.result() for done in [pool().submit(function, block) for block in blocks]]
@@ -72,8 +53,9 @@ def map_blocks(function, blocks):
 def background(function, *args):
     """Run ``function(*args)`` on the one background thread, after what was given to it before
     (the work of an opened file, one mesh at a time, while Blender's main thread answers events);
-    returns its :class:`concurrent.futures.Future`. The function uses numpy and scipy only: they
-    release the GIL in their loops, so the main thread runs beside it."""
+    returns its :class:`concurrent.futures.Future` (which keeps what it raised). The function
+    uses numpy and scipy only: they release the GIL in their loops, so the main thread runs
+    beside it; its :func:`map_blocks` calls keep to that thread."""
     global _BACKGROUND
     if _BACKGROUND is None:
         _BACKGROUND = ThreadPoolExecutor(max_workers=1, thread_name_prefix="skin_detach_background",
