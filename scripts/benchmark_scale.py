@@ -24,7 +24,8 @@ at 50K only, Laplacian Deform on the whole detail mesh). Both as ratios ours / t
 the final pose (bench/quality.py bend_quality): edge distortion, dihedral change, creases,
 handle error, volume change, RMS against libigl ARAP (10 iterations, where libigl is installed,
 at 50K). The last, settled step (a confirm's write: mesh, proxy, stretch attribute) is timed
-with the share the stretch attribute takes (``Binding.stretch`` + ``mesh_io.write_stretch``: the
+with the share the stretch attribute takes (``mesh_io.write_stretch``, which waits for the stretch
+made beside the positions' write, and writes it: the
 stretch is shown, api.show_stretch, so that every confirm writes it, as it does for an artist
 who shows it; hidden, a confirm writes none).
 
@@ -86,27 +87,25 @@ def fresh_scene():
 @contextlib.contextmanager
 def stretch_timer():
     """Time the stretch attribute inside whatever runs in the block: yields a dict whose
-    "stretch_s" sums the seconds spent in ``Binding.stretch`` and in ``mesh_io.write_stretch``
-    (the two calls ``Deformation._write`` makes for it while it is shown), the product's own
-    functions wrapped."""
-    from skin_detach_addon.blender import binding, mesh_io
+    "stretch_s" sums the seconds spent in ``mesh_io.write_stretch`` (``Deformation._write`` calls
+    it while the stretch is shown: it waits for the stretch and its colours, made on a pool
+    thread while the positions are written, and writes them), the product's own function wrapped."""
+    from skin_detach_addon.blender import mesh_io
     spent = {"stretch_s": 0.0}
-    originals = (binding.Binding.stretch, mesh_io.write_stretch)
+    original = mesh_io.write_stretch
 
-    def timed(function):
-        def run(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                spent["stretch_s"] += time.perf_counter() - start
-        return run
+    def timed(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            spent["stretch_s"] += time.perf_counter() - start
 
-    binding.Binding.stretch, mesh_io.write_stretch = timed(originals[0]), timed(originals[1])
+    mesh_io.write_stretch = timed
     try:
         yield spent
     finally:
-        binding.Binding.stretch, mesh_io.write_stretch = originals
+        mesh_io.write_stretch = original
 
 
 def bind_bend(obj, target_faces, preview_above=None):

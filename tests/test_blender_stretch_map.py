@@ -317,3 +317,26 @@ def test_bake_stretch_option_is_checked_and_the_command_line_passes_it(scene):
     assert bake_cli.parse_args(["--output", "o.ply"]).stretch is None
     assert bake_cli.parse_args(["--output", "o.ply", "--stretch"]).stretch is True
     assert bake_cli.parse_args(["--output", "o.ply", "--no-stretch"]).stretch is False
+
+
+def test_the_colours_are_blue_to_red_in_row_blocks_and_a_kept_buffer_takes_the_next_stretch_whole():
+    n = 250_000  # above the threads' row blocks
+    stretch = np.linspace(-0.1, 0.5, n).astype(np.float32)
+    colours = mesh_io.stretch_colors(stretch)
+    red = np.clip(stretch / mesh_io.STRETCH_FULL, 0.0, 1.0)
+    assert np.array_equal(colours[:, 0], red.astype(np.float32))
+    assert np.array_equal(colours[:, 2], (np.float32(1.0) - red).astype(np.float32))
+    assert (colours[:, 1] == np.float32(0.15)).all() and (colours[:, 3] == 1.0).all()
+    first = mesh_io.paint_stretch(stretch).copy()
+    again = mesh_io.paint_stretch(stretch[::-1].copy())  # the same buffer painted over
+    assert np.array_equal(first, colours.ravel())
+    assert np.array_equal(again, colours[::-1].ravel())
+
+
+def test_hiding_the_stretch_lets_the_painted_buffer_go():
+    obj = painted_sphere()
+    rigged(obj)
+    api.show_stretch(obj)
+    assert mesh_io._PAINT[0] is not None and mesh_io._PAINT[0].shape == (len(obj.data.vertices), 4)
+    api.show_stretch(obj, False)
+    assert mesh_io._PAINT[0] is None

@@ -601,9 +601,11 @@ def _world(obj):
     return np.array(obj.matrix_world, dtype=np.float64).ravel()
 
 
-def mark_written(obj, positions):
-    """Record the digest of the (n, 3) positions just written and the world matrix they were written under."""
-    set_written_state(obj, (mesh_io.positions_digest(positions), _world(obj)))
+def mark_written(obj, positions, digest=None):
+    """Record the digest of the (n, 3) positions just written (``digest``: their
+    :func:`.mesh_io.positions_digest`, if the caller made it) and the world matrix they were
+    written under."""
+    set_written_state(obj, (mesh_io.positions_digest(positions) if digest is None else digest, _world(obj)))
 
 
 def written_state(obj):

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import threads
 from ..core.errors import SkinDetachError
 from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
 from . import binding as stored
@@ -249,13 +250,22 @@ class Deformation:
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
         self.binding.mesh_guard.before_write(self.obj.data)
         shown = mark and mesh_io.stretch_shown(self.obj.data)
-        stretch = self.binding.stretch(proxy_positions) if shown else None
+        # The stretch, its colours and the written digest made on the pool's threads while the
+        # positions are written (numpy and zlib: they run beside Blender's copy).
+        painting = threads.beside(self._painted_stretch, proxy_positions) if shown else None
+        digesting = threads.beside(mesh_io.positions_digest, detail) if mark else None
         mesh_io.write_positions(self.obj.data, detail, checked=True)
         mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
         if mark:  # a step that stays (a confirm, Apply, api.deform, Reset): its stretch beside it, if shown
-            mesh_io.write_stretch(self.obj.data, stretch)
-            stored.mark_written(self.obj, detail)
+            mesh_io.write_stretch(self.obj.data, *(painting.result() if shown else (None,)))
+            stored.mark_written(self.obj, detail, digesting.result())
         self.show_preview(False)
+
+    def _painted_stretch(self, proxy_positions):
+        """(stretch (n,), its colours (4 n,)) of the mesh with the proxy at ``proxy_positions``
+        (m, 3): numpy only, on a pool thread (:meth:`_write`)."""
+        stretch = self.binding.stretch(proxy_positions)
+        return stretch, mesh_io.paint_stretch(stretch)
 
     def snapshot(self, mesh=True):
         """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change; without

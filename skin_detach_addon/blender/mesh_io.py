@@ -9,6 +9,7 @@ import zlib
 
 import numpy as np
 
+from ..core import threads
 from ..core.errors import SkinDetachError
 
 
@@ -98,6 +99,7 @@ def stop_watching():
         while _forget_fingerprints in handler_list:
             handler_list.remove(_forget_fingerprints)
     _FINGERPRINTS.clear()
+    _PAINT[0] = None
 
 
 def _forget_fingerprints(*args):
@@ -213,15 +215,39 @@ def write_point_floats(mesh, name, values):
     attribute.data.foreach_set("value", buffer)
 
 
-def stretch_colors(stretch):
-    """(n, 4) float32 colours of (n,) ``stretch``: blue at 0, red at :data:`STRETCH_FULL` or more."""
+def stretch_colors(stretch, out=None):
+    """(n, 4) float32 colours of (n,) ``stretch``: blue at 0, red at :data:`STRETCH_FULL` or more;
+    into ``out`` (n, 4) float32 when given, in row blocks on the core's threads."""
     stretch = np.asarray(stretch, dtype=np.float32)
-    out = np.empty((stretch.shape[0], 4), dtype=np.float32)
-    out[:, 1], out[:, 3] = 0.15, 1.0  # columns written in place: a stack of four columns cost a 3.2M confirm 0.3 s
-    np.multiply(stretch, np.float32(1.0 / STRETCH_FULL), out=out[:, 0])
-    np.clip(out[:, 0], 0.0, 1.0, out=out[:, 0])
-    np.subtract(np.float32(1.0), out[:, 0], out=out[:, 2])
+    n = stretch.shape[0]
+    out = np.empty((n, 4), dtype=np.float32) if out is None else out
+
+    def paint(rows):
+        part, values = out[rows[0]:rows[1]], stretch[rows[0]:rows[1]]
+        part[:, 1], part[:, 3] = 0.15, 1.0  # columns written in place: a stack of four cost a 3.2M confirm 0.3 s
+        np.multiply(values, np.float32(1.0 / STRETCH_FULL), out=part[:, 0])
+        np.clip(part[:, 0], 0.0, 1.0, out=part[:, 0])
+        np.subtract(np.float32(1.0), part[:, 0], out=part[:, 2])
+    bounds = np.linspace(0, n, (threads.WORKERS if n >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
+    threads.map_blocks(paint, list(zip(bounds[:-1], bounds[1:])))
     return out
+
+
+#: The (n, 4) float32 buffer the last stretch was painted in, painted over by the next one of as
+#: many vertices: a new one is memory the system hands out page by page (0.2 s of a 10M
+#: confirm). Let go when the stretch is hidden and when the add-on is unregistered.
+_PAINT = [None]
+
+
+def paint_stretch(stretch):
+    """(4 n,) float32 :func:`stretch_colors` of (n,) ``stretch`` flattened for ``foreach_set``, in
+    the kept buffer (valid until the next call). Numpy only: a confirm paints on a pool thread
+    while it writes the positions (:func:`write_stretch` takes the result)."""
+    buffer = _PAINT[0]
+    if buffer is None or buffer.shape[0] != stretch.shape[0]:
+        _PAINT[0] = buffer = None  # the old one goes first
+        buffer = _PAINT[0] = np.empty((stretch.shape[0], 4), dtype=np.float32)
+    return stretch_colors(np.asarray(stretch, dtype=np.float32), out=buffer).ravel()
 
 
 def stretch_shown(mesh):
@@ -245,19 +271,20 @@ def show_stretch(mesh, stretch):
               "active_attribute": active.name if active is not None else ""}
     write_point_floats(mesh, STRETCH, buffer)
     attribute = colors.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
-    attribute.data.foreach_set("color", stretch_colors(buffer).ravel())
+    attribute.data.foreach_set("color", paint_stretch(buffer))
     colors.active_color = attribute
     colors.default_color_name = record["render_color"]  # the render color stays the artist's
     _set_active_attribute(mesh, record["active_attribute"])
     mesh[STRETCH_RECORD] = record
 
 
-def write_stretch(mesh, stretch):
+def write_stretch(mesh, stretch, painted=None):
     """After a step that stays: while ``mesh`` shows its stretch, write (n,) ``stretch`` into
     :data:`STRETCH` and paint it into :data:`STRETCH_COLORS` (values only: which color is active
     stays the artist's choice). While it is not shown (``stretch`` may be None) nothing is
     written, and a :data:`STRETCH` attribute left by an earlier version (which wrote it on every
-    step) is removed: it would hold an old pose's figures."""
+    step) is removed: it would hold an old pose's figures. ``painted``: :func:`paint_stretch` of
+    ``stretch``, if the caller made it already."""
     if not stretch_shown(mesh):
         _remove_attribute(mesh, STRETCH)
         return
@@ -270,7 +297,9 @@ def write_stretch(mesh, stretch):
         attribute = mesh.color_attributes.new(STRETCH_COLORS, 'FLOAT_COLOR', 'POINT')
         if name == STRETCH_COLORS:
             mesh.color_attributes.active_color = attribute
-    attribute.data.foreach_set("color", stretch_colors(buffer).ravel())
+    if painted is None or np.shape(painted) != (4 * buffer.shape[0],):
+        painted = paint_stretch(buffer)
+    attribute.data.foreach_set("color", painted)
 
 
 def hide_stretch(mesh):
@@ -282,6 +311,7 @@ def hide_stretch(mesh):
     record = {key: record.get(key, "") for key in ("active_color", "render_color", "active_attribute")} \
         if hasattr(record, "get") else None
     _remove_attribute(mesh, STRETCH)
+    _PAINT[0] = None
     attribute = mesh.color_attributes.get(STRETCH_COLORS)
     if attribute is not None:
         mesh.color_attributes.remove(attribute)

@@ -8,6 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from . import threads
 from .threads import map_blocks
 
 
@@ -129,9 +130,17 @@ def component_labels(triangles, n_points, graph=None):
 def flat_ranges(starts, stops):
     """Concatenated ranges [starts[i], stops[i]): (positions, owner) where owner[k] = i."""
     counts = stops - starts
-    owner = np.repeat(np.arange(starts.size), counts)
-    offsets = np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)
-    return starts[owner] + offsets, owner
+    ends = threads.cumsum(counts)
+    total = int(ends[-1]) if ends.size else 0
+    positions = np.empty(total, dtype=np.result_type(starts.dtype, np.int64))
+    owner = np.empty(total, dtype=np.int64)
+    # In pieces: numpy keeps the GIL through a repeat (the background thread's diffusion).
+    for a, b in threads.pieces(ends):
+        first, last = int(ends[a] - counts[a]), int(ends[b - 1])
+        owner[first:last] = np.repeat(np.arange(a, b), counts[a:b])
+        positions[first:last] = np.repeat(starts[a:b] - (ends[a:b] - counts[a:b]), counts[a:b])
+        positions[first:last] += np.arange(first, last)
+    return positions, owner
 
 
 def segment_ranges(indptr, rows):

@@ -111,7 +111,7 @@ def one_ring_rows(ring, start, stop):
     one-ring neighbours, equal weights (``ring``: :func:`one_ring`), every column."""
     indptr = ring.indptr[start:stop + 1]
     counts = np.diff(indptr)
-    return sp.csr_matrix((np.repeat(1.0 / counts.astype(np.float64), counts), ring.indices[indptr[0]:indptr[-1]],
+    return sp.csr_matrix((threads.repeat(1.0 / counts.astype(np.float64), counts), ring.indices[indptr[0]:indptr[-1]],
                           indptr - indptr[0]), shape=(stop - start, ring.shape[1]))
 
 
@@ -159,7 +159,7 @@ class SeamWeights:
         positions = flat_ranges(start, stop)[0]
         index = np.int32 if positions.size < 2**31 - 1 else np.int64  # what scipy's own conversion gave
         indptr = np.zeros(rows.size + 1, dtype=index)
-        np.cumsum(stop - start, out=indptr[1:])
+        indptr[1:] = threads.cumsum(stop - start)
         base = sp.csr_matrix((self._skin.weight[positions], self._skin.face[positions].astype(index), indptr),
                              shape=(rows.size, self._frames.triangles.shape[0]))
         base.sort_indices()
