@@ -226,6 +226,33 @@ def test_edited_positions_or_topology_are_refused_and_nothing_is_written(scene):
     assert np.array_equal(mesh_io.read_positions(obj.data), before)
 
 
+def test_a_skin_detach_write_keeps_the_topology_fingerprint_and_a_later_edge_rotation_still_drops_it(scene):
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    handle.location.x += 0.1
+    bpy.ops.skin_detach.apply()
+    bpy.context.view_layer.update()  # Blender reports the write as a geometry update
+    pointer = obj.data.as_pointer()
+    assert pointer in mesh_io._FINGERPRINTS  # positions only: the corners are not read again
+    # Topology edited with the same counts (one edge rotated), after the write's update.
+    activate(obj)
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.select_mode(type='EDGE')
+    bpy.ops.mesh.select_all(action='DESELECT')
+    bpy.ops.object.mode_set(mode='OBJECT')
+    counts = (len(obj.data.vertices), len(obj.data.polygons), len(obj.data.loops))
+    mesh = obj.data
+    first, second = mesh.polygons[0].vertices[0], mesh.polygons[0].vertices[1]
+    for edge in mesh.edges:
+        edge.select = set(edge.vertices) == {first, second}
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.ops.mesh.edge_rotate(use_ccw=False)
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert (len(obj.data.vertices), len(obj.data.polygons), len(obj.data.loops)) == counts
+    activate(obj)
+    _refused(bpy.ops.skin_detach.apply, "edited after binding")
+
+
 def test_deleted_proxy_is_refused(scene):
     obj = import_spot()
     handle = rig(obj, axis=1)

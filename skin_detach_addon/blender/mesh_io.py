@@ -55,6 +55,14 @@ def group_members(obj, name):
 #: Mesh pointer -> (vertex, face and corner counts, the digest) of the fingerprints made since
 #: Blender last reported a change of that mesh's geometry (see :func:`mesh_fingerprint`).
 _FINGERPRINTS = {}
+#: Mesh pointer -> its counts, for meshes whose positions Skin Detach wrote since Blender's last
+#: geometry update: the update that reports that write keeps the mesh's fingerprint (positions
+#: are not topology; at 10M reading the corners again cost api.deform 0.6 s after every step).
+_POSITIONS_ONLY = {}
+
+
+def _counts(mesh):
+    return len(mesh.vertices), len(mesh.polygons), len(mesh.loops)
 
 
 def mesh_fingerprint(mesh):
@@ -64,10 +72,11 @@ def mesh_fingerprint(mesh):
     the whole corner array, and this runs on every solve.) The corners are read through a
     throw-away copy of the mesh (see :func:`read_shared`). A mesh's digest is kept until Blender's
     dependency graph reports its geometry changed (Edit Mode, sculpt, a script's update), an undo
-    or redo, or a file load (:func:`_forget_fingerprints`), or its counts change: at 10M vertices
+    or redo, or a file load (:func:`_forget_fingerprints`; not for Skin Detach's own writes of
+    positions), or its counts change: at 10M vertices
     each digest read 59M corners (0.2-0.5 s), and every step opens the binding."""
     _watch_geometry()
-    counts = (len(mesh.vertices), len(mesh.polygons), len(mesh.loops))
+    counts = _counts(mesh)
     known = _FINGERPRINTS.get(mesh.as_pointer())
     if known is not None and known[0] == counts:
         return known[1]
@@ -99,19 +108,25 @@ def stop_watching():
         while _forget_fingerprints in handler_list:
             handler_list.remove(_forget_fingerprints)
     _FINGERPRINTS.clear()
+    _POSITIONS_ONLY.clear()
     _PAINT[0] = None
 
 
 def _forget_fingerprints(*args):
     """A handler: drop the kept fingerprint of every mesh whose geometry the dependency graph
-    update reports changed (every one after an undo, a redo or a file load)."""
+    update reports changed (every one after an undo, a redo or a file load), unless the change
+    was Skin Detach's write of its positions (:func:`_refresh`) and its counts are the same."""
     depsgraph = args[1] if len(args) > 1 else None
     if depsgraph is None or not hasattr(depsgraph, "updates"):
         _FINGERPRINTS.clear()
+        _POSITIONS_ONLY.clear()
         return
     for update in depsgraph.updates:
         if update.is_updated_geometry and isinstance(update.id, _mesh_type()):
-            _FINGERPRINTS.pop(update.id.original.as_pointer(), None)
+            mesh = update.id.original
+            pointer = mesh.as_pointer()
+            if _POSITIONS_ONLY.pop(pointer, None) != _counts(mesh):
+                _FINGERPRINTS.pop(pointer, None)
 
 
 def _mesh_type():
@@ -362,10 +377,12 @@ def read_point_floats(mesh, name):
 
 def _refresh(mesh):
     """Normals and bounds are stale after a bulk attribute write: touch one vertex through RNA
-    (which tags the mesh) and update."""
+    (which tags the mesh) and update. The geometry update Blender then reports is this write's,
+    positions only: the mesh's kept fingerprint stays (:data:`_POSITIONS_ONLY`)."""
     if len(mesh.vertices):
         mesh.vertices[0].co = mesh.vertices[0].co
     mesh.update()
+    _POSITIONS_ONLY[mesh.as_pointer()] = _counts(mesh)
 
 
 def snapshot(mesh):
