@@ -372,12 +372,13 @@ def open_binding(obj):
     in this session is made now (or, when the background thread is making it, waited for, the
     window's progress shown); a record of schema 1 is rewritten compact (schema 2) once, said on
     the console. A preparation of the binding running in the background is waited for."""
+    triangles = mesh_io.read_triangles(obj.data) if _needs_opening(obj) else None  # with the fingerprint
     props, binding_id, proxy = _checked_record(obj)
     binding = _CACHE.get(binding_id)
     if binding is None:
         opening = _PENDING.get(binding_id)
         if opening is None or opening.name != obj.name:
-            opening = Opening(obj, props, binding_id)
+            opening = Opening(obj, props, binding_id, triangles)
         try:
             surface, preview = opening.made()
         finally:
@@ -397,14 +398,26 @@ def begin_opening(obj):
     """Start making the :class:`Binding` of ``obj`` on the background thread (its record and mesh
     read here, checked as :func:`open_binding` checks them); returns the :class:`Opening`, or None
     when the binding is made already. :func:`open_binding` finishes it on the main thread."""
+    # The triangles read first: the record's check then finds the fingerprint made from them.
+    triangles = mesh_io.read_triangles(obj.data) if _needs_opening(obj) else None
     props, binding_id, _ = _checked_record(obj)
     if binding_id in _CACHE:
         return None
     opening = _PENDING.get(binding_id)
     if opening is None or opening.name != obj.name:
-        opening = _PENDING[binding_id] = Opening(obj, props, binding_id)
+        opening = _PENDING[binding_id] = Opening(obj, props, binding_id, triangles)
         opening.start()
     return opening
+
+
+def _needs_opening(obj):
+    """Whether ``obj`` has a record whose binding is neither made nor being made (a mesh object)."""
+    record = readable_record(obj) if obj is not None and obj.type == 'MESH' else None
+    binding_id = None if record is None else record.get("binding_id")
+    if not isinstance(binding_id, str) or binding_id in _CACHE:
+        return False
+    pending = _PENDING.get(binding_id)
+    return pending is None or pending.name != obj.name
 
 
 class Opening:
@@ -418,7 +431,7 @@ class Opening:
     fraction  how far :meth:`make` got, 0 to 1, and ``stage``, what it does
     """
 
-    def __init__(self, obj, props, binding_id):
+    def __init__(self, obj, props, binding_id, triangles=None):
         self.name = obj.name
         self.binding_id = binding_id
         self.version = props["schema_version"]
@@ -429,7 +442,7 @@ class Opening:
         self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
                         if key not in ("proxy", "preview", STORE)}
         self.rest = np.array(_checked_rest(obj, stored_arrays, len(obj.data.vertices)))  # its own, not Blender's
-        self._triangles = mesh_io.read_triangles(obj.data)
+        self._triangles = mesh_io.read_triangles(obj.data) if triangles is None else triangles
         self.fraction, self.stage = 0.0, "reading"
         self._future = None
 

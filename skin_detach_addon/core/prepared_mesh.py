@@ -186,6 +186,7 @@ def prepare_mesh(points, triangles, components=True):
     size = max(_faces_diagonal(unique_points, faces, diagonal), 1e-300)
     least = DEGENERATE_AREA * (size * size)
     keep = distinct & (area2 > least * least)
+    del distinct, area2
     kept = faces if keep.all() else faces[keep]
     # Drop repeated faces (same three vertices in any order): they make non-manifold fans of two.
     first = np.flatnonzero(keep)[_first_of_repeats(kept)]
@@ -193,17 +194,22 @@ def prepare_mesh(points, triangles, components=True):
         kept, kept_cross = faces, cross
     else:
         kept, kept_cross = faces[first], cross[first]
+    degenerate = faces[~keep]
+    # What is not kept goes before the graph, its labels and the normals, the build's largest
+    # scratch memory (scipy's components copy the graph in float64: 1.5 GB at 10M vertices).
+    del first, keep, faces, cross
     kept = np.ascontiguousarray(kept)
     graph = half_edge_graph(kept, unique_points.shape[0])
+    labels = component_labels(kept, unique_points.shape[0], graph) if components else None
     return PreparedMesh(
         points=unique_points,
         weld=weld,
         triangles=kept,
         cross=kept_cross,
         normals=vertex_normals(unique_points, kept, kept_cross),
-        components=component_labels(kept, unique_points.shape[0], graph) if components else None,
+        components=labels,
         graph=graph,
-        degenerate=faces[~keep],
+        degenerate=degenerate,
         diagonal=diagonal,
         welded_vertices=int(points.shape[0] - unique_points.shape[0]),
         dropped_faces=int(triangles.shape[0] - kept.shape[0]),
