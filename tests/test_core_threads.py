@@ -30,3 +30,4 @@ def test_a_row_larger_than_a_piece_stays_whole(monkeypatch):
     # A cut after each row whose end passes a multiple of 10: rows 0 | 1-3 | 4.
     assert threads.pieces(ends) == [(0, 1), (1, 4), (4, 5)]
     assert threads.pieces(np.zeros(0, dtype=np.int64)) == []
+

@@ -29,6 +29,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from .geometry import column_max, column_min, face_cross, first_of_each_triple, rows_any, vertex_normals
+from . import threads
 from .threads import map_blocks
 
 #: A component is only clustered when it keeps at least this many faces afterwards.
@@ -83,7 +84,7 @@ EDGE_BLOCK = 1 << 20
 
 def _edge_lengths(points, graph):
     """``graph`` (u, u) CSR with its entries replaced by the lengths of the edges (same structure)."""
-    rows = np.repeat(np.arange(graph.shape[0], dtype=graph.indices.dtype), np.diff(graph.indptr))
+    rows = threads.repeat(np.arange(graph.shape[0], dtype=graph.indices.dtype), np.diff(graph.indptr))
     lengths = np.empty(graph.indices.size)
 
     def block(start):

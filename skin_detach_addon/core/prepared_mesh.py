@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import bbox_diagonal, component_labels, face_cross, half_edge_graph, vertex_normals
+from . import threads
 from .threads import map_blocks
 
 #: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal
@@ -151,11 +152,18 @@ def key_span(n):
 def _first_of_repeats(faces):
     """(q,) sorted indices of the first row of each unordered vertex triple in ``faces`` (f, 3), in
     :func:`canonical_faces` order (its repeated faces are neighbours)."""
-    if faces.shape[0] == 0:
-        return np.zeros(0, dtype=np.int64)
-    lo, hi = np.minimum(faces[:, 1], faces[:, 2]), np.maximum(faces[:, 1], faces[:, 2])
-    repeated = np.zeros(faces.shape[0], dtype=bool)
-    repeated[1:] = (faces[1:, 0] == faces[:-1, 0]) & (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1])
+    f = faces.shape[0]
+    repeated = np.zeros(f, dtype=bool)
+
+    def mark(start):  # slices side by side, each row against the one before it (small scratch arrays)
+        first, stop = max(start, 1), min(start + threads.PIECE, f)
+        if first >= stop:
+            return
+        row, before = faces[first:stop], faces[first - 1:stop - 1]
+        repeated[first:stop] = ((row[:, 0] == before[:, 0])
+                                & (np.minimum(row[:, 1], row[:, 2]) == np.minimum(before[:, 1], before[:, 2]))
+                                & (np.maximum(row[:, 1], row[:, 2]) == np.maximum(before[:, 1], before[:, 2])))
+    map_blocks(mark, list(range(0, f, threads.PIECE)))
     return np.flatnonzero(~repeated)
 
 

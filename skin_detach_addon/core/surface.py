@@ -585,9 +585,15 @@ class SkinDetachedSurface:
         rest-area weight times the corner's barycentric, negatives as 0; see
         :func:`.held_detail.proxy_ownership`), made once."""
         if self._corner_weights is None:
-            share = self.skin.weight[:, None] * np.clip(self.skin.bary, 0.0, None)
-            self._corner_weights = np.bincount(self.proxy_faces[self.skin.face].ravel(), weights=share.ravel(),
-                                               minlength=self.proxy_vertices.shape[0])
+            m, skin = self.proxy_vertices.shape[0], self.skin
+
+            def summed(start):  # a slice's small scratch arrays stay in the cache (10M: 1.2 s whole)
+                part = slice(start, start + threads.PIECE)
+                share = skin.weight[part, None] * np.clip(skin.bary[part], 0.0, None)
+                return np.bincount(self.proxy_faces[skin.face[part]].ravel(), weights=share.ravel(), minlength=m)
+
+            parts = threads.map_blocks(summed, list(range(0, skin.face.shape[0], threads.PIECE)))
+            self._corner_weights = np.sum(parts, axis=0) if parts else np.zeros(m)  # the slices' order: the same bits
         return self._corner_weights
 
     def proxy_vertices_for(self, ids):

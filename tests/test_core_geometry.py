@@ -1,0 +1,23 @@
+"""Core: the prepared mesh's connectivity (component labels) on a mesh of many loose parts."""
+
+import numpy as np
+
+from skin_detach_addon.core import geometry
+
+
+def test_component_labels_are_the_weak_components_numbered_by_first_vertex():
+    from scipy.sparse.csgraph import connected_components
+    rng = np.random.default_rng(3)
+    # Seven strips of triangles, their vertex ids shuffled, a few faces dropped (open borders
+    # walked one way only), and loose vertices at the end.
+    strip = np.array([[i, i + 1, i + 2] if i % 2 == 0 else [i + 1, i, i + 2] for i in range(40)])
+    k, u = 7, 42
+    triangles = np.concatenate([strip + c * u for c in range(k)])
+    triangles = rng.permutation(k * u)[triangles]
+    triangles = triangles[rng.random(triangles.shape[0]) > 0.1]
+    n = k * u + 3
+    labels = geometry.component_labels(triangles, n)
+    weak = connected_components(geometry.half_edge_graph(triangles, n), directed=True, connection="weak")[1]
+    assert np.array_equal(labels, weak)
+    first = np.array([np.flatnonzero(labels == label)[0] for label in range(labels.max() + 1)])
+    assert (np.diff(first) > 0).all()  # numbered in the order of their first vertex
