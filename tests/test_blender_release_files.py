@@ -53,7 +53,7 @@ def test_the_0_1_0_file_opens_with_its_rig_and_its_saved_pose_is_what_its_handle
     assert np.abs(rest - saved).max() > 0.05                  # the saved pose was a pose
 
 
-def test_the_0_1_0_file_drags_and_cancels_and_confirms(scene, tmp_path):
+def test_the_0_1_0_file_drags_confirms_saves_and_reopens(scene, tmp_path):
     obj, handle, path = opened(tmp_path)
     before = mesh_io.read_positions(obj.data).copy()
     session = DragSession(obj, handle, TopView(0.01), (0, 0))
