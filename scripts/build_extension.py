@@ -4,7 +4,9 @@ fast-simplification wheels Blender needs (numpy ships with Blender).
     python scripts/build_extension.py [--platforms linux-x64,windows-x64,...] [--out dist]
 
 For every platform it downloads (pip, binary wheels only, no dependencies) scipy and
-fast-simplification for CPython 3.11 (Blender 4.2 to 5.0) and 3.13 (later Blender), stages
+fast-simplification for CPython 3.11 (Blender 4.2 to 5.0) and 3.13 (Blender 5.1 and later), and
+on Linux for 3.14 too (Linux distributions' own Blender packages run the system's Python 3.14;
+no official Blender runs it, and fast-simplification has no 3.14 wheel for Intel macOS), stages
 ``skin_detach_addon/`` with ``blender_manifest.toml`` plus the wheel list, builds with Blender's
 own extension tool (``blender_ext.py build --split-platforms``, shipped in the bpy wheel) and
 runs its ``validate`` on every zip. It fails, naming what is missing, if a platform has no
@@ -21,7 +23,9 @@ import zipfile
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 PACKAGES = {"scipy": "1.17.1", "fast-simplification": "0.2.0"}
-PYTHONS = ("3.11", "3.13", "3.14")
+PYTHONS = ("3.11", "3.13")
+#: Python versions only Linux builds carry wheels for (a distribution's Blender on its own Python).
+LINUX_PYTHONS = ("3.14",)
 #: Blender platform -> pip platform tags, best first. macOS arm64 takes scipy's macosx_12_0 wheel
 #: only (its macosx_14_0 wheel needs a newer macOS than Blender 4.2 does).
 PLATFORMS = {
@@ -36,6 +40,11 @@ PLATFORMS = {
 
 class BuildFailed(Exception):
     pass
+
+
+def pythons(platform):
+    """The CPython versions whose wheels the zip of ``platform`` carries."""
+    return PYTHONS + (LINUX_PYTHONS if platform.startswith("linux-") else ())
 
 
 def blender_ext():
@@ -107,7 +116,7 @@ def build(platforms, out, cache):
     cache.mkdir(parents=True, exist_ok=True)
     needed = {platform: [] for platform in platforms}
     for platform in platforms:
-        for python in PYTHONS:
+        for python in pythons(platform):
             needed[platform] += download(platform, python, cache)
             print(f"{platform} cp{python.replace('.', '')}: " + ", ".join(w.name for w in needed[platform][-2:]),
                   flush=True)

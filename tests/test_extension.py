@@ -85,6 +85,7 @@ def test_linux_zip_builds_validates_installs_and_runs(extension_zip, tmp_path):
         manifest = archive.read("blender_manifest.toml").decode()
     assert sum(n.startswith("wheels/scipy-1.17.1-cp311") for n in names) == 1
     assert sum(n.startswith("wheels/scipy-1.17.1-cp313") for n in names) == 1
+    assert sum(n.startswith("wheels/fast_simplification-0.2.0-cp314") for n in names) == 1  # distributions' Blender
     assert 'platforms = ["linux-x64"]' in manifest and 'license = ["SPDX:GPL-3.0-or-later"]' in manifest
     assert not any("__pycache__" in n or n.startswith("tests/") for n in names)
 
@@ -95,6 +96,24 @@ def test_linux_zip_builds_validates_installs_and_runs(extension_zip, tmp_path):
     run = subprocess.run([sys.executable, str(script), str(zips[0])], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0 and "installed extension works" in run.stdout, run.stdout[-2000:] + run.stderr[-2000:]
+
+
+def test_every_platform_builds_and_validates_with_its_own_pythons_wheels(tmp_path):
+    """What `make extension` builds: one zip per platform, each validated by Blender's tool (the
+    script checks); CPython 3.11 and 3.13 wheels everywhere, 3.14 in the Linux zips only."""
+    build = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--out", str(tmp_path / "dist"),
+                            "--wheels", str(tmp_path / "wheels")], capture_output=True, text=True, timeout=1800)
+    assert build.returncode == 0, build.stderr[-2000:]
+    zips = sorted((tmp_path / "dist").glob("*.zip"))
+    assert [z.name.rsplit("-", 1)[1] for z in zips] == [
+        "linux_arm64.zip", "linux_x64.zip", "macos_arm64.zip", "macos_x64.zip", "windows_x64.zip"]
+    for path in zips:
+        with zipfile.ZipFile(path) as archive:
+            wheels = [n for n in archive.namelist() if n.startswith("wheels/")]
+        for package in ("scipy-1.17.1", "fast_simplification-0.2.0"):
+            tags = sorted(n.split("-")[2] for n in wheels if n.startswith(f"wheels/{package}-"))
+            expected = ["cp311", "cp313", "cp314"] if "linux" in path.name else ["cp311", "cp313"]
+            assert tags == expected, (path.name, package, tags)
 
 
 def test_build_refuses_unknown_platforms(tmp_path):
