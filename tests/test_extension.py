@@ -363,3 +363,13 @@ def test_build_repo_lists_the_zip_and_a_higher_version_published_into_the_same_f
 
     again = build_repo(ROOT / "scripts" / "build_repo.py", repo, wheels)  # the older source: refused
     assert again.returncode == 1 and f"found {newer}" in again.stderr and new.exists()
+
+
+def test_build_repo_fails_clearly_on_a_zip_it_cannot_read(tmp_path):
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "skin_detach_addon-9.9.9-linux_x64.zip").write_bytes(b"not a zip")
+    run = build_repo(ROOT / "scripts" / "build_repo.py", repo, tmp_path / "wheels")
+    assert run.returncode == 1 and run.stderr.startswith("build_repo: error: ")
+    assert "skin_detach_addon-9.9.9-linux_x64.zip: expected an extension zip" in run.stderr, run.stderr
+    assert not (repo / "index.json").exists() and not (tmp_path / "wheels").exists()
