@@ -8,7 +8,7 @@ VENV313 ?= .venv313
 # The oldest Blender the manifest claims (CI): Blender 4.2 LTS as a module on Python 3.11.
 VENV42 ?= .venv42
 
-.PHONY: demo test test313 test42 test-gui docs-pictures bench extension clean
+.PHONY: demo test test313 test42 test-gui docs-pictures bench extension repo clean
 
 $(VENV)/.installed: requirements.txt requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,11 @@ bench: $(VENV)/.installed
 
 extension: $(VENV)/.installed
 	$(PY) scripts/build_extension.py
+
+# A static extension repository for a studio (docs/studio.md): every platform's zip and Blender's
+# index.json in dist/repo/; older versions there move to dist/repo/archive/.
+repo: $(VENV)/.installed
+	$(PY) scripts/build_repo.py
 
 clean:
 	rm -rf $(VENV) $(VENV313) $(VENV42) out build dist .pytest_cache

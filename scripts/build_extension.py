@@ -15,6 +15,7 @@ wheel for a package and Python version, or a built zip lacks one.
 
 import argparse
 import importlib.util
+import os
 import pathlib
 import shutil
 import subprocess
@@ -48,7 +49,13 @@ def pythons(platform):
 
 
 def blender_ext():
-    """Path of Blender's extension command-line tool inside the installed bpy wheel."""
+    """Path of Blender's extension command-line tool inside the installed bpy wheel, or the one
+    ``$BLENDER_EXT`` names (a Blender installation's ``scripts/addons_core/bl_pkg/cli/blender_ext.py``)."""
+    given = os.environ.get("BLENDER_EXT")
+    if given:
+        if not pathlib.Path(given).is_file():
+            raise BuildFailed(f"BLENDER_EXT: expected the path of blender_ext.py, got {given!r} (no such file)")
+        return pathlib.Path(given)
     spec = importlib.util.find_spec("bpy")
     if spec is None or not spec.submodule_search_locations:
         raise BuildFailed("bpy: expected the bpy module installed (it ships blender_ext.py), it is not")

@@ -316,3 +316,60 @@ def test_openjd_stepped_and_negative_frames_bake_and_a_blend_output_is_refused(w
                      "OutputFile=all.blend")
     assert run.returncode != 0 and "one .obj or .ply file per frame" in run.stdout, run.stdout[-3000:]
     assert not (tmp_path / "b" / "all.blend").exists()
+
+
+def build_repo(script, out, wheels):
+    return subprocess.run([sys.executable, str(script), "--platforms", "linux-x64", "--out", str(out),
+                           "--wheels", str(wheels)], capture_output=True, text=True, timeout=600)
+
+
+def test_build_repo_lists_the_zip_and_a_higher_version_published_into_the_same_folder(extension_zip, tmp_path):
+    """`make repo`: index.json (Blender's server-generate) lists the zip by the manifest's id and
+    version, its URL relative to the index, its real sha256 and size; a higher version built from
+    a copy of the source into the same folder is listed alone, the older zip kept in archive/."""
+    import hashlib
+    import json
+    import shutil
+    import tomllib
+    _, folder = extension_zip
+    wheels, repo = folder / "wheels", tmp_path / "repo"
+    first = build_repo(ROOT / "scripts" / "build_repo.py", repo, wheels)
+    assert first.returncode == 0, first.stderr
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    old = repo / f"skin_detach_addon-{manifest['version']}-linux_x64.zip"
+    assert "index.json" in first.stdout and old.name in first.stdout
+    [entry] = json.loads((repo / "index.json").read_text())["data"]
+    assert (entry["id"], entry["version"]) == (manifest["id"], manifest["version"])
+    assert entry["archive_url"] == f"./{old.name}" and entry["platforms"] == ["linux-x64"]
+    assert entry["archive_hash"] == "sha256:" + hashlib.sha256(old.read_bytes()).hexdigest()
+    assert entry["archive_size"] == old.stat().st_size
+
+    source = tmp_path / "source"
+    for name in ("scripts", "skin_detach_addon"):
+        shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
+    major, minor, patch = map(int, manifest["version"].split("."))
+    newer = f"{major}.{minor}.{patch + 1}"
+    text = (ROOT / "blender_manifest.toml").read_text()
+    (source / "blender_manifest.toml").write_text(text.replace(f'version = "{manifest["version"]}"',
+                                                               f'version = "{newer}"', 1))
+    second = build_repo(source / "scripts" / "build_repo.py", repo, wheels)
+    assert second.returncode == 0, second.stderr
+    new = repo / f"skin_detach_addon-{newer}-linux_x64.zip"
+    assert sorted(p.relative_to(repo).as_posix() for p in repo.rglob("*.zip")) == [
+        f"archive/{old.name}", new.name]
+    [entry] = json.loads((repo / "index.json").read_text())["data"]
+    assert (entry["version"], entry["archive_url"]) == (newer, f"./{new.name}")
+    assert entry["archive_hash"] == "sha256:" + hashlib.sha256(new.read_bytes()).hexdigest()
+
+    again = build_repo(ROOT / "scripts" / "build_repo.py", repo, wheels)  # the older source: refused
+    assert again.returncode == 1 and f"found {newer}" in again.stderr and new.exists()
+
+
+def test_build_repo_fails_clearly_on_a_zip_it_cannot_read(tmp_path):
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "skin_detach_addon-9.9.9-linux_x64.zip").write_bytes(b"not a zip")
+    run = build_repo(ROOT / "scripts" / "build_repo.py", repo, tmp_path / "wheels")
+    assert run.returncode == 1 and run.stderr.startswith("build_repo: error: ")
+    assert "skin_detach_addon-9.9.9-linux_x64.zip: expected an extension zip" in run.stderr, run.stderr
+    assert not (repo / "index.json").exists() and not (tmp_path / "wheels").exists()
