@@ -31,3 +31,14 @@ def test_a_row_larger_than_a_piece_stays_whole(monkeypatch):
     assert threads.pieces(ends) == [(0, 1), (1, 4), (4, 5)]
     assert threads.pieces(np.zeros(0, dtype=np.int64)) == []
 
+
+
+@pytest.mark.parametrize("n, most", [(0, None), (10, None), (250_000, None), (1_000_000, 1 << 19), (5, 2)])
+def test_row_blocks_cover_the_rows_in_order_once(n, most):
+    spans = threads.row_blocks(n, most)
+    assert spans[0][0] == 0 and spans[-1][1] == n
+    assert all(p[1] == q[0] for p, q in zip(spans, spans[1:]))
+    if most is not None:
+        assert all(b - a <= most for a, b in spans)
+    if n < threads.PARALLEL_MIN_ROWS and most is None:
+        assert spans == [(0, n)]

@@ -254,8 +254,7 @@ def stretch_colors(stretch, out=None):
         np.multiply(values, np.float32(1.0 / STRETCH_FULL), out=part[:, 0])
         np.clip(part[:, 0], 0.0, 1.0, out=part[:, 0])
         np.subtract(np.float32(1.0), part[:, 0], out=part[:, 2])
-    bounds = np.linspace(0, n, (threads.WORKERS if n >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
-    threads.map_blocks(paint, list(zip(bounds[:-1], bounds[1:])))
+    threads.map_blocks(paint, threads.row_blocks(n))
     return out
 
 

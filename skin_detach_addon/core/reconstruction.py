@@ -77,8 +77,6 @@ class Rebuild:
         self.n_detail = weld.shape[0]
         self.n_proxy = proxy_vertices.shape[0]
         self._stacked = np.empty((3, self.n_proxy + proxy_triangles.shape[0]))
-        count = threads.WORKERS if self.n_detail >= threads.PARALLEL_MIN_ROWS else 1
-        bounds = np.linspace(0, self.n_detail, max(count, -(-self.n_detail // BLOCK_ROWS)) + 1).astype(int)
 
         # Each block holds its rows sorted by their entry count: scipy's product loop mispredicts
         # a branch whenever the row length changes, which made the diffused skin's rows (4 to 16
@@ -90,7 +88,7 @@ class Rebuild:
             index = np.int32 if self.n_detail < 2**31 else np.int64  # the detail rows: half of int64's memory
             return (rows[0] + order).astype(index), sp.csr_matrix(matrix[order])
 
-        self._blocks = map_blocks(block, list(zip(bounds[:-1], bounds[1:])))
+        self._blocks = map_blocks(block, threads.row_blocks(self.n_detail, most=BLOCK_ROWS))
         self.nnz = sum(rows.nnz for _, rows in self._blocks)
         self._blocks32 = None
 

@@ -188,8 +188,7 @@ class SeamWeights:
         if rows.size < u:
             blocks = [one_ring_average(self._ring, rows, self._scratch())]
         else:  # the whole mesh (the build's free diffusion): row blocks multiplied side by side
-            bounds = np.linspace(0, u, (threads.WORKERS if u >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
-            blocks = [one_ring_rows(self._ring, a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+            blocks = [one_ring_rows(self._ring, a, b) for a, b in threads.row_blocks(u)]
         if keep.any():
             free = sp.diags((~keep).astype(np.float64))
             source = base
@@ -411,14 +410,13 @@ class SeamWeights:
         # int8 counts while no ring has 128 vertices (a fan's pole may: int32 then, its data copied)
         unmarked = unmarked.view(np.int8) if self._widest_ring() < 128 else unmarked.astype(np.int32)
         u = self._u
-        bounds = np.linspace(0, u, (threads.WORKERS if u >= threads.PARALLEL_MIN_ROWS else 1) + 1).astype(int)
         ring = self._ring
         counts = np.concatenate(map_blocks(
             lambda span: sp.csr_matrix((ring.data[ring.indptr[span[0]]:ring.indptr[span[1]]],
                                         ring.indices[ring.indptr[span[0]]:ring.indptr[span[1]]],
                                         ring.indptr[span[0]:span[1] + 1] - ring.indptr[span[0]]),
                                        shape=(span[1] - span[0], u)) @ unmarked,
-            list(zip(bounds[:-1], bounds[1:]))))
+            threads.row_blocks(u)))
         return np.flatnonzero(marked & (counts > 0))
 
     def _scratch(self):

@@ -50,10 +50,7 @@ class SkinStretch:
         identity = weld.shape[0] == u and bool((weld == np.arange(u)).all())
         weights = welded if identity else sp.csr_matrix(welded[weld])
         # Row blocks multiplied side by side on the core's threads (a confirm at 10M shows it).
-        n = weights.shape[0]
-        count = threads.WORKERS if n >= threads.PARALLEL_MIN_ROWS else 1
-        bounds = np.linspace(0, n, count + 1).astype(int)
-        self._blocks = [weights[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+        self._blocks = [weights[a:b] for a, b in threads.row_blocks(weights.shape[0])]
 
     def face_stretch(self, points):
         """(k,) the stretch of every proxy face at ``points`` (m, 3)."""

@@ -43,6 +43,17 @@ def shutdown():
         _POOL = None
 
 
+def row_blocks(n, most=None):
+    """Row ranges (a, b) covering rows 0..n: one per thread (:data:`WORKERS`) from
+    :data:`PARALLEL_MIN_ROWS` rows on, one below, and more where ``most`` rows a range at most
+    asks for them (for :func:`map_blocks`)."""
+    count = WORKERS if n >= PARALLEL_MIN_ROWS else 1
+    if most is not None:
+        count = max(count, -(-n // most))
+    bounds = np.linspace(0, n, count + 1).astype(int)
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+
+
 def _serial():
     """Make this thread's :func:`map_blocks` calls run their blocks one after the other."""
     _LOCAL.serial = True
