@@ -61,11 +61,12 @@ class BendScenario:
         return groups
 
     def held_rig(self, surface):
-        """The scenario as the add-on rigs it (:mod:`skin_detach_addon.core.held_detail`): a dict
-        with the held proxy ids (c,) sorted, their targets (c, 3), ``groups`` (m,), the
-        ``layout`` (Layout: the anchors' and the handle's detail held), ``pulls`` (two (s, m)
-        drop-row matrices for DualLaplacian) and ``motions`` (identity, the handle's motion)."""
-        from skin_detach_addon.core.held_detail import Layout, held_proxy_vertices
+        """The scenario as the add-on rigs it
+        (:mod:`skin_detach_addon.core.detached_surface.held_detail`): a dict with the held proxy ids
+        (c,) sorted, their targets (c, 3), ``groups`` (m,), the ``layout`` (Layout: the anchors' and
+        the handle's detail held), ``pulls`` (two (s, m) drop-row matrices for DualLaplacian) and
+        ``motions`` (identity, the handle's motion)."""
+        from skin_detach_addon.core.detached_surface.held_detail import Layout, held_proxy_vertices
 
         handle = held_proxy_vertices(surface, self.handle_ids)
         anchors = np.setdiff1d(held_proxy_vertices(surface, self.anchor_ids), handle)

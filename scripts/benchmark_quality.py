@@ -62,8 +62,8 @@ from bench.rigs import base, failed_goals, falloff, head, held_errors, limb, mak
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
-from skin_detach_addon.core.seam_weights import SEAM_STEPS
-from skin_detach_addon.core.stretch import SkinStretch
+from skin_detach_addon.core.detached_surface.seam_weights import SEAM_STEPS
+from skin_detach_addon.core.detached_surface.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 RIG_MESHES = "armadillo,armadillo-300K"

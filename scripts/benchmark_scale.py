@@ -141,7 +141,7 @@ def blender_drag(obj, handle, scenario, steps):
     from mathutils import Matrix
 
     from skin_detach_addon.blender.deformation import Deformation
-    from skin_detach_addon.core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL
+    from skin_detach_addon.core.proxy_solve.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL
     deformation = Deformation(obj)
     rest_world = np.array(handle.matrix_world)
     times = []
@@ -249,8 +249,9 @@ def modal_drag(session, steps):
 def large_row(spec, steps):
     """The modal drag at scale, as DragSession drives it (fake top view): build seconds, stages
     and the peak memory it adds (the Blender mesh itself not counted), the seconds until its
-    background job (the full-detail free rebuild, :data:`~skin_detach_addon.core.surface.BACKGROUND_ABOVE`)
-    is done, Add Anchor's and Add Handle's seconds (each prepares its layout; the background job
+    background job (the full-detail free rebuild,
+    :data:`~skin_detach_addon.core.detached_surface.surface.BACKGROUND_ABOVE`) is done,
+    Add Anchor's and Add Handle's seconds (each prepares its layout; the background job
     runs beside them), then, once the background job is done, three drags (first drag; the same
     handle again; a second handle's first drag), each with the seconds adding its handle, its
     first and median move ms, the moves' 95th percentile and its confirm's seconds with the

@@ -157,7 +157,7 @@ def check_zip(path, wheels):
     missing = [w.name for w in wheels if f"wheels/{w.name}" not in names]
     if missing:
         raise BuildFailed(f"{path.name}: expected the wheels {', '.join(missing)} inside, they are missing")
-    for required in ("__init__.py", "blender_manifest.toml", "api.py", "core/dual_laplacian.py"):
+    for required in ("__init__.py", "blender_manifest.toml", "api.py", "core/proxy_solve/dual_laplacian.py"):
         if required not in names:
             raise BuildFailed(f"{path.name}: expected {required} inside, it is missing")
 

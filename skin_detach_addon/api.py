@@ -26,9 +26,9 @@ from .blender import drag_session
 from .blender.drag_session import CANCELLED, FINISHED, RUNNING, DragSession, moved_matrix
 from .blender.skin_rig import PREVIEW_ABOVE, BuildCancelled, BuildJob
 from .core import threads
+from .core.detached_surface.held_detail import held_proxy_vertices
+from .core.detached_surface.symmetry import mirrored_ids
 from .core.errors import SkinDetachError
-from .core.held_detail import held_proxy_vertices
-from .core.symmetry import mirrored_ids
 from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
@@ -422,10 +422,10 @@ def _check_handle(empty):
 
 
 def handle_conflicts(obj):
-    """Handles and anchors of ``obj`` that share proxy vertices: a list of dicts (loser, winner:
-    the empties' names; shared: how many proxy vertices). The newer one wins, whatever its kind
-    (the rule of :func:`.core.held_detail.owned_pairs`: it also decides which one a selected mesh
-    vertex follows)."""
+    """Handles and anchors of ``obj`` that share proxy vertices: a list of dicts (loser, winner: the
+    empties' names; shared: how many proxy vertices). The newer one wins, whatever its kind (the
+    rule of :func:`.core.detached_surface.held_detail.owned_pairs`: it also decides which one a
+    selected mesh vertex follows)."""
     empties = handles_of(obj)
     proxy = stored.proxy_of(_bound(obj))  # cheap enough for every redraw of the panel
     m = len(proxy.data.vertices) if proxy is not None else None

@@ -1,4 +1,4 @@
-"""Exhaustive, loop-per-vertex reference of the skin rules in skin_detach_addon.core.skin.
+"""Exhaustive, loop-per-vertex reference of the skin rules in skin_detach_addon.core.detached_surface.skin.
 
 Every proxy face is tested for every vertex with textbook cross-product barycentrics, and
 the candidate restriction is applied as a predicate on each face. With ``paper=True`` the
@@ -8,7 +8,7 @@ vertex): the paper's own rules, which mis-attach across a closed mouth.
 
 import numpy as np
 
-from skin_detach_addon.core.skin import CONTAIN_EPS, DISTANCE_EPS, Skin
+from skin_detach_addon.core.detached_surface.skin import CONTAIN_EPS, DISTANCE_EPS, Skin
 
 
 def _project_all(point, p0, p1, p2):

@@ -336,7 +336,7 @@ def test_on_a_machine_fifty_times_slower_the_drag_still_settles_and_confirms_wha
 
 def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():
     from types import SimpleNamespace
-    from skin_detach_addon.core.proxy_solves import follow_start
+    from skin_detach_addon.core.proxy_solve.proxy_solves import follow_start
     rng = np.random.default_rng(3)
     older = rng.normal(size=(50, 3))
     last = older + rng.normal(size=(50, 3))                  # a large jump, cut short or a snap

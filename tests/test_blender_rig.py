@@ -8,7 +8,7 @@ bpy = pytest.importorskip("bpy")
 from blender_support import activate, band, import_spot, rig, save_and_reopen, select_vertices  # noqa: E402
 
 from skin_detach_addon.blender import binding, binding_figures, handles, mesh_io, skin_rig  # noqa: E402
-from skin_detach_addon.core import proxy_solves  # noqa: E402
+from skin_detach_addon.core.proxy_solve import proxy_solves  # noqa: E402
 
 
 def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(scene):

@@ -94,7 +94,7 @@ def test_a_cap_symmetric_across_x_and_the_toggled_y_moves_along_x_and_stays_symm
     motion = handles.local_motion(obj, top)
     assert abs(motion[0, 3] - 0.2) <= 1e-6 and abs(motion[1, 3]) <= 1e-9
     assert off(obj, top, rest, diagonal) <= 1e-5
-    from skin_detach_addon.core.symmetry import mirror_map
+    from skin_detach_addon.core.detached_surface.symmetry import mirror_map
     now, mapping = positions(obj), mirror_map(rest, 1)
     image = now[mapping[mapping >= 0]] * [1.0, -1.0, 1.0]
     assert np.abs(now[mapping >= 0] - image).max() <= 1e-6 * diagonal  # the toggled symmetry is exact

@@ -11,7 +11,7 @@ from blender_support import activate, band, quad_sphere  # noqa: E402
 from skin_detach_addon import api, bake_cli  # noqa: E402
 from skin_detach_addon.blender import binding, mesh_io  # noqa: E402
 from skin_detach_addon.core.errors import SkinDetachError  # noqa: E402
-from skin_detach_addon.core.stretch import SkinStretch  # noqa: E402
+from skin_detach_addon.core.detached_surface.stretch import SkinStretch  # noqa: E402
 
 
 def painted_sphere(uvs=True):

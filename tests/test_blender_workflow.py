@@ -58,7 +58,7 @@ def test_a_mirrored_rig_moves_twins_mirrored_and_keeps_a_symmetric_mesh_symmetri
     assert twin.matrix_basis != twin.matrix_basis.Identity(4)  # the twin followed
     now = positions(obj)
     mapping = np.full(len(rest), -1)
-    from skin_detach_addon.core.symmetry import mirror_map
+    from skin_detach_addon.core.detached_surface.symmetry import mirror_map
     mapping = mirror_map(rest, 0)
     matched = mapping >= 0
     image = now[mapping[matched]] * [-1.0, 1.0, 1.0]
@@ -265,7 +265,7 @@ def test_typed_numbers_stay_in_budget_and_an_absurd_one_is_refused_as_a_keystrok
 def _mirror_error(points, axis=0, rest=None):
     """Largest distance of a vertex from its mirror twin's image (twins found on ``rest``, else on
     ``points`` themselves)."""
-    from skin_detach_addon.core.symmetry import mirror_map
+    from skin_detach_addon.core.detached_surface.symmetry import mirror_map
     mapping = mirror_map(points if rest is None else rest, axis)
     matched = np.flatnonzero(mapping >= 0)
     image = points[mapping[matched]].copy()

@@ -7,10 +7,10 @@ import pytest
 from conftest import diagonal
 from shapes import box, closed_mouth, merge, plane, random_rotation
 from skin_detach_addon.core import SkinDetachedSurface, SkinDetachError
-from skin_detach_addon.core.clustering import cluster_mesh
+from skin_detach_addon.core.detached_surface.clustering import cluster_mesh
 from skin_detach_addon.core.geometry import face_cross, unique_edges, unit_rows
-from skin_detach_addon.core.prepared_mesh import prepare_mesh
-from skin_detach_addon.core.surface import Preview
+from skin_detach_addon.core.detached_surface.prepared_mesh import prepare_mesh
+from skin_detach_addon.core.detached_surface.surface import Preview
 
 
 def _clustered(points, tris, target):
@@ -138,7 +138,7 @@ def test_preview_arrays_round_trip_and_refuse_damage(bundled):
 
 
 def test_a_proxy_vertex_without_faces_never_leaves_detail_unbound():
-    from skin_detach_addon.core.skin import CASE_TWO, bind_skin
+    from skin_detach_addon.core.detached_surface.skin import CASE_TWO, bind_skin
     points, tris = box(cells=(4, 4, 4))
     mesh = prepare_mesh(points, tris)
     proxy_points = np.concatenate([mesh.points, [[0.5, 0.5, 0.5]]])  # one isolated proxy vertex

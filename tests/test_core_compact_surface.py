@@ -8,9 +8,9 @@ import pytest
 from shapes import merge, plane
 from test_core_skin import messy_mesh
 
-from skin_detach_addon.core.compact_surface import compact_arrays, narrowest, surface_from_compact
+from skin_detach_addon.core.detached_surface.compact_surface import compact_arrays, narrowest, surface_from_compact
 from skin_detach_addon.core.errors import SkinDetachError
-from skin_detach_addon.core.surface import SkinDetachedSurface
+from skin_detach_addon.core.detached_surface.surface import SkinDetachedSurface
 
 SKIN = ("vertex", "face", "bary", "height", "weight", "case")
 

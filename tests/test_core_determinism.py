@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from shapes import plane
-from skin_detach_addon.core import SkinDetachedSurface, clustering, geometry, prepared_mesh, skin, threads
-from skin_detach_addon.core import reconstruction
+from skin_detach_addon.core import SkinDetachedSurface, geometry, threads
+from skin_detach_addon.core.detached_surface import clustering, prepared_mesh, reconstruction, skin
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
@@ -187,7 +187,7 @@ def test_normal_test_decides_signs_near_zero_in_numpy_order():
     """The normal test counts detail normals facing away (a non-positive dot with the face normal);
     dots near zero, whose BLAS rounding differs per CPU, are decided by numpy's own arithmetic in
     a fixed order (here: face normals perpendicular to bin directions, up to rounding)."""
-    from skin_detach_addon.core.checked_collapse import CUBE_BINS, _CollapseState, cube_directions
+    from skin_detach_addon.core.detached_surface.checked_collapse import CUBE_BINS, _CollapseState, cube_directions
     from skin_detach_addon.core.geometry import cross_rows, unit_rows
     points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     tris = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])

@@ -199,7 +199,7 @@ def test_rigidity_reduces_stretching_on_the_bend_scenario(armadillo_proxy):
 def test_a_cycling_solve_stops_early_with_its_calmest_iterate():
     """A bent armadillo proxy (as bound in Blender) whose volume-kept iteration cycles around a
     fold: the solve gives up STALL_ITERATIONS after its smallest change and says it did not converge."""
-    from skin_detach_addon.core.dual_laplacian import STALL_ITERATIONS
+    from skin_detach_addon.core.proxy_solve.dual_laplacian import STALL_ITERATIONS
     case = np.load(pathlib.Path(__file__).parent / "data" / "cycling_bend.npz")
     solver = DualLaplacian(case["pv"], case["pf"], case["ids"], preserve_volume=True, method="paper")
     result = solver.solve(case["targets"], max_iter=200, tol=1e-12)

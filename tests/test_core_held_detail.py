@@ -6,7 +6,7 @@ import pytest
 
 from conftest import check_energy_derivatives, diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
-from skin_detach_addon.core.held_detail import held_proxy_vertices, proxy_ownership
+from skin_detach_addon.core.detached_surface.held_detail import held_proxy_vertices, proxy_ownership
 from shapes import cylinder, random_rotation
 
 
@@ -132,7 +132,7 @@ def test_the_pulled_energy_derivatives_match_finite_differences(rod):
 
 
 def test_a_layout_is_the_same_only_entry_for_entry_and_its_key_follows():
-    from skin_detach_addon.core.held_detail import Layout
+    from skin_detach_addon.core.detached_surface.held_detail import Layout
     groups = np.array([-1, 0, 1, 1, -1])
     layout = Layout(groups, [(0, np.array([3, 4])), (1, np.array([7, 8, 9]))])
     assert layout.same(groups.copy(), [(0, np.array([3, 4])), (1, np.array([7, 8, 9]))])
@@ -146,7 +146,7 @@ def test_a_layout_is_the_same_only_entry_for_entry_and_its_key_follows():
 
 
 def test_owned_pairs_give_each_vertex_to_the_last_pair_naming_it():
-    from skin_detach_addon.core.held_detail import owned_pairs
+    from skin_detach_addon.core.detached_surface.held_detail import owned_pairs
     pairs = owned_pairs([(1, np.array([5, 1, 2, 3])), (2, np.array([3, 4])), (0, np.array([2, 9]))])
     assert [label for label, _ in pairs] == [1, 2, 0]
     assert [ids.tolist() for _, ids in pairs] == [[1, 5], [3, 4], [2, 9]]
@@ -155,7 +155,7 @@ def test_owned_pairs_give_each_vertex_to_the_last_pair_naming_it():
 
 
 def test_place_held_is_exact_under_any_affine_and_gives_rest_back_bit_for_bit():
-    from skin_detach_addon.core.held_detail import place_held
+    from skin_detach_addon.core.detached_surface.held_detail import place_held
     rng = np.random.default_rng(4)
     rest = rng.normal(size=(50, 3)).astype(np.float32)
     out = np.zeros_like(rest)
@@ -173,7 +173,7 @@ def test_a_selected_vertex_follows_its_own_group_not_the_one_holding_its_faces(r
     """A small handle right beside the anchors, the anchors made after it: its proxy corners are
     the anchors' (the newer wins them), yet its vertices follow the handle's motion, and the
     anchored ones stay put, with the handle's motion any affine map."""
-    from skin_detach_addon.core.held_detail import Layout, place_held
+    from skin_detach_addon.core.detached_surface.held_detail import Layout, place_held
     points, _, surface, anchors, _ = rod
     z = points[:, 2]
     edge = anchors[np.argsort(z[anchors])[-1]]

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import check_energy_derivatives, diagonal
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface, SkinDetachError
-from skin_detach_addon.core.hessian_factor import HessianFactor, LaggedHessian
+from skin_detach_addon.core.proxy_solve.hessian_factor import HessianFactor, LaggedHessian
 from shapes import bend_constraints as bend
 
 
@@ -167,8 +167,8 @@ def _bent_start(spot_proxy):
 
 
 def test_conjugate_gradients_stop_past_the_budget_with_a_descent_step(spot_proxy):
-    from skin_detach_addon.core.projected_newton import CG_OVERRUN, _newton_step
-    from skin_detach_addon.core.work_budget import WorkBudget
+    from skin_detach_addon.core.proxy_solve.projected_newton import CG_OVERRUN, _newton_step
+    from skin_detach_addon.core.proxy_solve.work_budget import WorkBudget
     solver, targets, x = _bent_start(spot_proxy)
     state = solver.energy_terms.at(x)
     free = solver.free
@@ -210,7 +210,7 @@ def test_only_an_idle_solve_makes_the_hessian_factor_the_next_moves_precondition
 
 
 def test_a_failed_step_is_shortened_to_the_parabola_s_minimiser_within_a_tenth_to_a_half():
-    from skin_detach_addon.core.projected_newton import _shorter
+    from skin_detach_addon.core.proxy_solve.projected_newton import _shorter
     slope = -2.0
     for curvature, expected in ((4.0, 0.25), (1.5, 0.5), (100.0, 0.1)):  # E(a) - E(0) = slope a + c a^2
         rise = slope * 1.0 + curvature * 1.0
@@ -273,7 +273,7 @@ def test_a_budgeted_solve_never_ends_above_its_start_however_little_the_budget(s
 
 
 def test_the_work_rate_turns_milliseconds_into_units_at_the_measured_cost():
-    from skin_detach_addon.core.work_budget import WorkRate
+    from skin_detach_addon.core.proxy_solve.work_budget import WorkRate
     rate = WorkRate(0.5)
     assert rate.budget(4.0).units == 8
     for _ in range(30):                            # the machine turns out twice as slow at the work
@@ -285,7 +285,7 @@ def test_the_work_rate_turns_milliseconds_into_units_at_the_measured_cost():
 
 
 def test_a_slow_clock_still_settles_and_the_solver_measures_its_work_in_cpu_time(spot_proxy, monkeypatch):
-    from skin_detach_addon.core.proxy_solves import SETTLE_SLICE_MS
+    from skin_detach_addon.core.proxy_solve.proxy_solves import SETTLE_SLICE_MS
     points, tris = spot_proxy
     ids, targets = bend(points)
     solver = DualLaplacian(points, tris, ids)
@@ -308,7 +308,7 @@ def test_a_slow_clock_still_settles_and_the_solver_measures_its_work_in_cpu_time
 
 
 def test_a_settle_after_moves_that_needed_many_cg_steps_makes_the_factor_first(spot_proxy):
-    from skin_detach_addon.core.projected_newton import REFRESH_STEPS
+    from skin_detach_addon.core.proxy_solve.projected_newton import REFRESH_STEPS
     solver, targets, _ = _bent_start(spot_proxy)
     moved = solver.solve(targets, max_iter=100, tol=1e-8)  # the bend, every step preconditioned at rest
     assert solver._lagged.at_rest and solver._lagged.steps > REFRESH_STEPS  # a step's CG needed many steps

@@ -3,7 +3,7 @@ reflected covariances."""
 
 import numpy as np
 
-from skin_detach_addon.core.rotations import best_rotations
+from skin_detach_addon.core.proxy_solve.rotations import best_rotations
 
 
 def kabsch(covariance):
@@ -39,7 +39,7 @@ def test_recovers_a_known_rotation_and_survives_degenerate_input():
 
 
 def test_warm_started_rotations_equal_cold_ones():
-    from skin_detach_addon.core.rotations import WarmRotations
+    from skin_detach_addon.core.proxy_solve.rotations import WarmRotations
     rng = np.random.default_rng(5)
     covariance = rng.normal(size=(300, 3, 3))
     warm = WarmRotations()

@@ -12,10 +12,10 @@ from shapes import box, closed_mouth, merge, plane, random_rotation
 from skin_reference import reference_skin
 from skin_detach_addon.core import SkinDetachedSurface, SkinDetachError
 from skin_detach_addon.core.geometry import half_edge_graph
-from skin_detach_addon.core.prepared_mesh import prepare_mesh
-from skin_detach_addon.core.reconstruction import Rebuild, rebuild_matrix
-from skin_detach_addon.core.simplification import simplify
-from skin_detach_addon.core.skin import bind_skin
+from skin_detach_addon.core.detached_surface.prepared_mesh import prepare_mesh
+from skin_detach_addon.core.detached_surface.reconstruction import Rebuild, rebuild_matrix
+from skin_detach_addon.core.detached_surface.simplification import simplify
+from skin_detach_addon.core.detached_surface.skin import bind_skin
 
 
 def noisy_box(seed=0):
@@ -27,8 +27,8 @@ def noisy_box(seed=0):
 def test_core_never_imports_bpy():
     code = ("import sys; sys.modules['bpy'] = None; sys.modules['mathutils'] = None; sys.modules['bmesh'] = None\n"
             "import importlib, pkgutil, skin_detach_addon.core\n"
-            "for info in pkgutil.iter_modules(skin_detach_addon.core.__path__):\n"
-            "    importlib.import_module('skin_detach_addon.core.' + info.name)\n"
+            "for info in pkgutil.walk_packages(skin_detach_addon.core.__path__, 'skin_detach_addon.core.'):\n"
+            "    importlib.import_module(info.name)\n"
             "assert not any(m in sys.modules and sys.modules[m] is not None for m in ('bpy', 'mathutils', 'bmesh'))")
     subprocess.run([sys.executable, "-c", code], check=True)
 
@@ -225,7 +225,7 @@ def test_the_builds_one_ring_from_its_prepared_edges_is_that_of_every_face_bit_f
     expected = sp.csr_matrix(sp.diags(1.0 / np.asarray(matrix.sum(axis=1)).ravel()) @ matrix)
     loaded = SkinDetachedSurface.from_arrays(sds.to_arrays())
     loaded.attach_topology(tris)
-    from skin_detach_addon.core.seam_weights import one_ring, one_ring_average, one_ring_rows
+    from skin_detach_addon.core.detached_surface.seam_weights import one_ring, one_ring_average, one_ring_rows
     halves = [one_ring_rows(sds._seam_weights()._ring, 0, u // 2), one_ring_rows(sds._seam_weights()._ring, u // 2, u)]
     for made in (one_ring_rows(sds._seam_weights()._ring, 0, u), one_ring_rows(loaded._seam_weights()._ring, 0, u),
                  sp.vstack(halves, format="csr")):
@@ -252,7 +252,7 @@ def test_edits_reach_only_the_carried_part():
     assert (motion[corner] > 0.0).all()
     # A face's candidate moves with its own corners only; the weights reach the faces of the
     # detail within SEAM_STEPS rings (the diffused skin), and no further.
-    from skin_detach_addon.core.seam_weights import SEAM_STEPS, one_ring
+    from skin_detach_addon.core.detached_surface.seam_weights import SEAM_STEPS, one_ring
     near = np.isin(sds.proxy_faces, carriers).any(axis=1)
     touched = np.zeros(sds.skin.case.shape[0], dtype=bool)
     touched[sds.skin.vertex[near[sds.skin.face]]] = True
@@ -382,7 +382,7 @@ def test_the_diffused_skin_bends_the_detail_less_than_the_skin_as_bound(bundled)
     from bench.quality import dihedral_change
     from bench.scenario import bend_scenario
     from skin_detach_addon.core import DualLaplacian
-    from skin_detach_addon.core.reconstruction import scaled_normals
+    from skin_detach_addon.core.detached_surface.reconstruction import scaled_normals
     points, tris = bundled("armadillo")
     sds = SkinDetachedSurface.build(points, tris, target_faces=1000)
     scenario = bend_scenario(points)
@@ -428,7 +428,7 @@ def test_rebuild_refuses_non_finite_proxies_instead_of_writing_nan():
     broken[0, 1] = np.nan
     with pytest.raises(SkinDetachError, match="proxy_vertices"):
         sds.reconstruct(broken)
-    from skin_detach_addon.core.reconstruction import Rebuild
+    from skin_detach_addon.core.detached_surface.reconstruction import Rebuild
     rebuild = Rebuild(sds.skin, sds.weld, sds.proxy_vertices, sds.proxy_faces)
     with pytest.raises(SkinDetachError, match="finite"):
         rebuild(broken)  # the check lives in the rebuild itself, not only in the input validation
@@ -437,7 +437,7 @@ def test_rebuild_refuses_non_finite_proxies_instead_of_writing_nan():
 def test_a_rebuild_made_in_blocks_is_the_rebuild_made_whole(bundled, monkeypatch):
     """Rebuild makes W in blocks of detail rows (each sorted by row length): any block size gives
     the same matrix and the same rebuilt positions, bit for bit."""
-    from skin_detach_addon.core import reconstruction
+    from skin_detach_addon.core.detached_surface import reconstruction
     points, tris = bundled("spot")
     sds = SkinDetachedSurface.build(points, tris, target_faces=300)
     skin = sds._seam_weights().skin()
@@ -474,7 +474,7 @@ def test_a_thin_ribbon_rebuilds_its_rest_exactly(cells):
 
 
 def test_a_proxy_face_collapsed_to_a_point_carries_no_vertex():
-    from skin_detach_addon.core.skin import bind_skin, check_coefficients
+    from skin_detach_addon.core.detached_surface.skin import bind_skin, check_coefficients
     rng = np.random.default_rng(7)
     # A square proxy (two faces) plus a third face whose corners are 1e-14 apart, far from the rest.
     proxy = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -515,8 +515,8 @@ def test_held_rows_re_diffused_locally_equal_the_diffusion_over_the_whole_mesh(b
     """SeamWeights.skin(keep) re-diffuses only near the held rows; the result is the diffusion
     with those rows held over every vertex, and its weights are a partition of unity."""
     import scipy.sparse as sp
-    from skin_detach_addon.core.seam_weights import SeamWeights
-    from skin_detach_addon.core.skin import ProxyFrames
+    from skin_detach_addon.core.detached_surface.seam_weights import SeamWeights
+    from skin_detach_addon.core.detached_surface.skin import ProxyFrames
     points, tris = bundled("spot")
     sds, _, bent, groups = bent_surface(points, tris, 300)
     u = sds.skin.case.shape[0]
@@ -533,7 +533,7 @@ def test_held_rows_re_diffused_locally_equal_the_diffusion_over_the_whole_mesh(b
     # Held rows keep their own weights, under the rule every row follows: entries under THRESHOLD
     # of the row's largest dropped, the row renormalised (a held case-2 vertex of this proxy has
     # a face at 0.006 against 0.43).
-    from skin_detach_addon.core.seam_weights import THRESHOLD
+    from skin_detach_addon.core.detached_surface.seam_weights import THRESHOLD
     own = as_matrix(sds.skin.vertex, sds.skin.face, sds.skin.weight)[held]
     own = np.where(own >= THRESHOLD * own.max(axis=1, keepdims=True), own, 0.0)
     own /= own.sum(axis=1, keepdims=True)
@@ -544,8 +544,8 @@ def test_the_rows_of_a_few_vertices_equal_those_rows_of_the_whole_layout_skin_bi
     """SeamWeights.skin_of(vertices, keep) diffuses only their neighbourhood, yet gives exactly
     the associations skin(keep) and the diffusion over the whole mesh give them, in the same
     order, and none for other vertices; drop_rows made from it are those of the whole skin."""
-    from skin_detach_addon.core.seam_weights import SeamWeights
-    from skin_detach_addon.core.skin import ProxyFrames
+    from skin_detach_addon.core.detached_surface.seam_weights import SeamWeights
+    from skin_detach_addon.core.detached_surface.skin import ProxyFrames
     points, tris = bundled("spot")
     sds, scenario, _, groups = bent_surface(points, tris, 300)
     u = sds.skin.case.shape[0]
@@ -575,7 +575,7 @@ def test_the_rows_of_a_few_vertices_equal_those_rows_of_the_whole_layout_skin_bi
 
 def test_merged_rows_place_two_vertex_grouped_lists_as_a_stable_sort_would():
     """_merged_rows counts where a stable argsort of the concatenation by vertex would sort."""
-    from skin_detach_addon.core.seam_weights import _merged_rows
+    from skin_detach_addon.core.detached_surface.seam_weights import _merged_rows
     rng = np.random.default_rng(3)
     u = 50
     first_vertex = np.sort(rng.integers(0, u, 300))
@@ -614,7 +614,7 @@ def test_bound_disagreement_of_case_two_and_loose_vertices_alone_is_that_of_ever
     """bound_disagreement looks at case-2 and loose vertices only: the faces bind_skin gives the
     others agree with their normals, so every association's dot gives the same answer."""
     from skin_detach_addon.core.geometry import face_cross, unit_rows, vertex_normals
-    from skin_detach_addon.core.skin import bound_disagreement
+    from skin_detach_addon.core.detached_surface.skin import bound_disagreement
     points, tris = bundled("bunny")  # loose vertices too
     sds = SkinDetachedSurface.build(points, tris, target_faces=200, normal_test=False)
     mesh = prepare_mesh(points, tris)
@@ -640,7 +640,7 @@ def test_a_layouts_band_rows_equal_the_whole_layouts_rows_bit_for_bit(bundled):
     for held in (rig["layout"].held, rig["layout"].held + [(2, extra)]):
         groups = rig["groups"].copy()
         if len(held) > 2:
-            from skin_detach_addon.core.held_detail import held_proxy_vertices
+            from skin_detach_addon.core.detached_surface.held_detail import held_proxy_vertices
             groups[held_proxy_vertices(sds, extra)] = 2
         seams = sds._seam_weights()
         labels = sds._held_labels(held)
@@ -659,7 +659,7 @@ def test_a_large_meshs_free_rebuild_made_in_the_background_rebuilds_the_same(bun
     """A mesh above BACKGROUND_ABOVE makes its free rebuild on a background thread after the
     build: its progress is reported until it is done, whatever needs it waits for it, and the
     rebuild equals the one made in the build bit for bit (free and with a layout)."""
-    from skin_detach_addon.core import surface as surface_module
+    from skin_detach_addon.core.detached_surface import surface as surface_module
     points, tris = bundled("spot")
     made = SkinDetachedSurface.build(points, tris, target_faces=300)
     monkeypatch.setattr(surface_module, "BACKGROUND_ABOVE", 0)

@@ -1,15 +1,15 @@
 """The binding of a mesh object, stored in the object's ID properties so it lives in the .blend.
 
-Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom
-Properties panel), schema 2: the schema version, a binding id, the mesh's topology fingerprint,
-the digest of the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest
-positions (3n float32, the mesh's own vertex order) and what of the core surface cannot be
-recomputed quickly (:func:`.core.compact_surface.compact_arrays`: the proxy, the carrier in the
-narrowest integer type its range allows, stored as bytes because Blender's ID-property arrays
-hold int32 at the narrowest, the build figures), plus the preview's arrays whole (float64 or
-int32, flattened). Opening makes the skin again from the rest positions, the mesh's triangles
-and the carrier (:func:`.core.compact_surface.surface_from_compact`), bit for bit the one the
-build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
+Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom Properties
+panel), schema 2: the schema version, a binding id, the mesh's topology fingerprint, the digest of
+the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest positions (3n
+float32, the mesh's own vertex order) and what of the core surface cannot be recomputed quickly
+(:func:`.core.detached_surface.compact_surface.compact_arrays`: the proxy, the carrier in the
+narrowest integer type its range allows, stored as bytes because Blender's ID-property arrays hold
+int32 at the narrowest, the build figures), plus the preview's arrays whole (float64 or int32,
+flattened). Opening makes the skin again from the rest positions, the mesh's triangles and the
+carrier (:func:`.core.detached_surface.compact_surface.surface_from_compact`), bit for bit the one
+the build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
 once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
 id, so undo and reload find them again or rebuild them from the properties; after a file is
 opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
@@ -24,14 +24,14 @@ import uuid
 import numpy as np
 
 from ..core import threads
-from ..core.compact_surface import compact_arrays, surface_from_compact
+from ..core.detached_surface import HeldPlacement, Preview, SkinDetachedSurface, SkinStretch
+from ..core.detached_surface.compact_surface import compact_arrays, surface_from_compact
+from ..core.detached_surface.held_detail import layout_of
+from ..core.detached_surface.surface import BACKGROUND_ABOVE
+from ..core.detached_surface.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
 from ..core.errors import SkinDetachError
-from ..core.surface import BACKGROUND_ABOVE, Preview, SkinDetachedSurface
 from ..core.geometry import bbox_diagonal
-from ..core.held_detail import HeldPlacement, layout_of
-from ..core.proxy_solves import ProxySolves
-from ..core.stretch import SkinStretch
-from ..core.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
+from ..core.proxy_solve import ProxySolves
 from . import mesh_io
 from .mesh_guard import MeshGuard
 
@@ -69,7 +69,7 @@ class Binding:
     rest        (n, 3) float32 rest positions, exactly as they were in the mesh
     proxy       the proxy object
     preview     core Preview (c vertices over the same proxy) or None
-    solves      the proxy's solvers and warm starts (:class:`.core.proxy_solves.ProxySolves`)
+    solves      the proxy's solvers and warm starts (:class:`.core.proxy_solve.proxy_solves.ProxySolves`)
     mesh_guard  the mesh's :class:`.mesh_guard.MeshGuard`, armed while a drag shows the preview
     last_step   figures of the last step in this session (dict, see StepReport.figures), or None
     """
@@ -100,7 +100,8 @@ class Binding:
 
     def stretch(self, proxy_vertices):
         """(n,) float32 the detail's stretch against its rest when the proxy is at
-        ``proxy_vertices`` (m, 3) (:class:`.core.stretch.SkinStretch`, made on first use)."""
+        ``proxy_vertices`` (m, 3) (:class:`.core.detached_surface.stretch.SkinStretch`, made on
+        first use)."""
         return self._skin_stretch()(proxy_vertices)
 
     def _skin_stretch(self):
@@ -132,9 +133,10 @@ class Binding:
         return answer
 
     def layout(self, groups, held):
-        """The :class:`.core.held_detail.Layout` of ``groups`` (m,) and ``held`` (pairs (group label,
-        detail ids)): the last one given when they are the same, so its key, a digest of every held
-        id (5 MB and 3 ms at 3.2M), is made once per layout, not once per drag move."""
+        """The :class:`.core.detached_surface.held_detail.Layout` of ``groups`` (m,) and ``held``
+        (pairs (group label, detail ids)): the last one given when they are the same, so its key, a
+        digest of every held id (5 MB and 3 ms at 3.2M), is made once per layout, not once per drag
+        move."""
         self._layout = layout_of(self._layout, groups, held)
         return self._layout
 
@@ -142,10 +144,10 @@ class Binding:
         """(n, 3) float32 detail positions from deformed proxy vertices (m, 3) (``layout``: their
         rigid groups and held detail, see :meth:`SkinDetachedSurface.reconstruct`), made exactly
         symmetric with ``mirror`` (the (n,) mirror map and the axis index, see
-        :func:`.core.symmetry.symmetrize`), then every held vertex placed exactly by its group's
-        (4, 4) motion in ``motions`` (one per pair of ``layout.held``;
-        :class:`.core.held_detail.HeldPlacement`), in a reused buffer (copy it to keep it past the
-        next call)."""
+        :func:`.core.detached_surface.symmetry.symmetrize`), then every held vertex placed exactly
+        by its group's (4, 4) motion in ``motions`` (one per pair of ``layout.held``;
+        :class:`.core.detached_surface.held_detail.HeldPlacement`), in a reused buffer (copy it to
+        keep it past the next call)."""
         if layout is None:  # no handles: no rig to be symmetric
             return self.surface.reconstruct(proxy_vertices, out=self._buffer)
         placement = self._placement("detail", layout, self.rest, layout.owned)
@@ -161,8 +163,8 @@ class Binding:
         return placement(out, motions)
 
     def _placement(self, which, layout, rest, pairs):
-        """The :class:`.core.held_detail.HeldPlacement` of ``layout``'s ``pairs`` over ``rest`` for the
-        mesh or the preview (``which``), made once per layout."""
+        """The :class:`.core.detached_surface.held_detail.HeldPlacement` of ``layout``'s ``pairs``
+        over ``rest`` for the mesh or the preview (``which``), made once per layout."""
         key, placement = self._placements.get(which, (None, None))
         if key != layout.key():
             placement = HeldPlacement(rest, pairs)
@@ -170,10 +172,10 @@ class Binding:
         return placement
 
     def prepare(self, layout):
-        """Prepare the rebuild of ``layout`` (a :class:`.core.held_detail.Layout`) for the mesh and
-        its preview, and the stretch, so the first :meth:`rebuild`, :meth:`rebuild_preview` and
-        :meth:`stretch` with it start at once (the rebuilds' float32 copies too: they write into
-        float32 buffers)."""
+        """Prepare the rebuild of ``layout`` (a :class:`.core.detached_surface.held_detail.Layout`)
+        for the mesh and its preview, and the stretch, so the first :meth:`rebuild`,
+        :meth:`rebuild_preview` and :meth:`stretch` with it start at once (the rebuilds' float32
+        copies too: they write into float32 buffers)."""
         # A mesh with a preview drags it: its own rebuild (and stretch) is needed at the confirm
         # only, and a large one's is made on a background thread (Add Handle does not wait for
         # it; a confirm may).
@@ -197,7 +199,7 @@ class Binding:
 
     def _preview_held_of(self, layout):
         """The preview's held pairs of ``layout``: (label, preview ids) per pair of its owned detail
-        (:meth:`.core.surface.Preview.held_of`), made once per layout."""
+        (:meth:`.core.detached_surface.surface.Preview.held_of`), made once per layout."""
         key = layout.key()
         if self._preview_held[0] != key:
             self._preview_held = (key, self.preview.held_of(layout.owned, self.surface.weld, self.rest))

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core import threads
 from ..core.errors import SkinDetachError
-from ..core.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
+from ..core.proxy_solve.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io
 from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
@@ -86,7 +86,7 @@ class Deformation:
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`, the held
         detail's (4, 4) motions, one per pair of the layout) from the handles' transforms
         (``follow``, ``budget_ms``, ``idle``: see
-        :meth:`.core.proxy_solves.ProxySolves.solve`)."""
+        :meth:`.core.proxy_solve.proxy_solves.ProxySolves.solve`)."""
         empties = self.handles()
         handle_symmetry.sync_twins(self.obj, empties)
         axis, asked = handle_symmetry.symmetry_axis(self.obj, empties, self.binding.is_own_mirror_image)

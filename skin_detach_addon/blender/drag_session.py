@@ -83,11 +83,11 @@ class DragSession:
     empties, the mesh and the proxy exactly as they were. A session ends with one of them:
     only the confirm records the written positions (moves skip that per-move checksum).
 
-    A move solves within :data:`DRAG_BUDGET_MS` and shows where it got. While the mouse rests,
-    TIMER events (the modal operator's window timer) go on with the same solve, a slice of
+    A move solves within :data:`DRAG_BUDGET_MS` and shows where it got. While the mouse rests, TIMER
+    events (the modal operator's window timer) go on with the same solve, a slice of
     :data:`SETTLE_SLICE_MS` each, and show it, until it certifies to the settle tolerance (both
-    budgets counted in work done, :mod:`..core.work_budget`: a machine busy with other programs
-    shows the same shapes, later): the header says
+    budgets counted in work done, :mod:`..core.proxy_solve.work_budget`: a machine busy with other
+    programs shows the same shapes, later): the header says
     "settling", then "settled", and further TIMER events do nothing. The confirm of a settled
     drag writes the shape shown (rebuilt in full detail from the same proxy when the preview
     showed it); of an unsettled one, the solve continued to the settle tolerance first.

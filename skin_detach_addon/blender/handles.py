@@ -113,8 +113,8 @@ def _invertible_affine(rows):
 
 def handles_of(obj, proxy=None):
     """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices; see
-    :func:`.core.held_detail.owned_pairs`); with ``proxy``, those under it at any depth (an artist
-    may parent a hand's empty to the forearm's)."""
+    :func:`.core.detached_surface.held_detail.owned_pairs`); with ``proxy``, those under it at any
+    depth (an artist may parent a hand's empty to the forearm's)."""
     pool = proxy.children_recursive if proxy is not None else _all_objects()
     found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
@@ -357,7 +357,7 @@ def constraints(obj, empties, rest_proxy):
     detail: (group label, detail ids (h,), (4, 4) local motion) per handle or anchor made from
     detail vertices (an anchor's motion the identity), from the handle and anchor ``empties`` of
     ``obj`` (:func:`handles_of`, oldest first) in that order: where they share proxy or detail
-    vertices the newer wins (:func:`.core.held_detail.owned_pairs`)."""
+    vertices the newer wins (:func:`.core.detached_surface.held_detail.owned_pairs`)."""
     m, n = rest_proxy.shape[0], len(obj.data.vertices)
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)

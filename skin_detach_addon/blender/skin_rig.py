@@ -9,10 +9,10 @@ import threading
 import numpy as np
 from mathutils import Matrix
 
+from ..core.detached_surface import SkinDetachedSurface
+from ..core.detached_surface.held_detail import held_proxy_vertices
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
-from ..core.held_detail import held_proxy_vertices
-from ..core.surface import SkinDetachedSurface
 from ..core.validation import MIN_PREVIEW_VERTICES
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io, preview_stand_in
@@ -418,8 +418,9 @@ def selection(context):
 
 
 def current_stretch(obj):
-    """(n,) float32 the stretch of the bound mesh ``obj`` (Object Mode) against its rest in the
-    pose its proxy holds (the last step's: :class:`.core.stretch.SkinStretch`); needs no attribute."""
+    """(n,) float32 the stretch of the bound mesh ``obj`` (Object Mode) against its rest in the pose
+    its proxy holds (the last step's: :class:`.core.detached_surface.stretch.SkinStretch`); needs no
+    attribute."""
     binding = stored.open_binding(obj)
     return binding.stretch(mesh_io.read_positions(binding.proxy.data))
 

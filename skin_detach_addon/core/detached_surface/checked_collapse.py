@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import rows_any, unit_rows
+from ..geometry import rows_any, unit_rows
 from .simplification import MIN_COMPONENT_FACES, collapse_roots
 
 #: Collapses that turn a face by more than this (cosine of the old/new normal) are flips.

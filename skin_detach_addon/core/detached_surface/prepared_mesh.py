@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .geometry import bbox_diagonal, component_labels, face_cross, half_edge_graph, vertex_normals
-from . import threads
-from .threads import map_blocks
+from ..geometry import bbox_diagonal, component_labels, face_cross, half_edge_graph, vertex_normals
+from .. import threads
+from ..threads import map_blocks
 
 #: A face is degenerate when twice its area is below this fraction of the squared bbox diagonal
 #: (of the vertices that faces use).
@@ -34,7 +34,7 @@ class PreparedMesh:
     cross       (t, 3) float64   face cross products of ``triangles`` (twice the area along the normal)
     normals     (u, 3) float64   unit vertex normals (zero where no face of non-zero area)
     components  (u,) int64       connected-component label of every welded vertex
-    graph       (u, u) CSR       :func:`~.geometry.half_edge_graph` of ``triangles``
+    graph       (u, u) CSR       :func:`~..geometry.half_edge_graph` of ``triangles``
     degenerate  (d, 3) int64     the faces dropped for a repeated id or zero area, in welded ids
                                  (with ``graph``, the edges of every face: the one-ring of
                                  :func:`.seam_weights.one_ring_average`)

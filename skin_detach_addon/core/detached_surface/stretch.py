@@ -21,8 +21,8 @@ and both are exactly 0 at rest.
 import numpy as np
 import scipy.sparse as sp
 
-from . import threads
-from .validation import as_points
+from .. import threads
+from ..validation import as_points
 
 
 class SkinStretch:

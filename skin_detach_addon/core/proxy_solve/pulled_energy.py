@@ -26,7 +26,7 @@ square of a uniform scale, like E.
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import SkinDetachError
+from ..errors import SkinDetachError
 
 #: The pull's weight against the energy's own (see the module): lower bends the proxy more
 #: freely, higher leaves less difference for the skin's diffusion to blend in around the held

@@ -8,9 +8,9 @@ for an armadillo's leg: the proxy bends only outside that, and stretches there. 
 the proxy vertices its selection *owns* (:func:`proxy_ownership` at least :data:`OWNED`: nearly
 all of the skin's weight on them comes from selected vertices); the rest of the selection pulls
 the free proxy around its border towards the handle's motion
-(:class:`.pulled_energy.PulledEnergy`), and the rebuild binds every selected vertex to a proxy
-face its handle holds whole (:func:`held_rows`), so it lands exactly where the handle puts it;
-the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
+(:class:`..proxy_solve.pulled_energy.PulledEnergy`), and the rebuild binds every selected vertex
+to a proxy face its handle holds whole (:func:`held_rows`), so it lands exactly where the handle
+puts it; the skin's diffusion (:mod:`.seam_weights`) blends its free neighbours into it.
 
 Which handle or anchor a detail vertex follows, the one rule (:func:`owned_pairs`,
 :meth:`Layout.owned`): a vertex follows the group whose selection names it, never a neighbour's
@@ -29,7 +29,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .validation import as_vertex_ids
+from ..validation import as_vertex_ids
 
 #: A proxy vertex is held by a selection that brings at least this share of the skin's weight on it.
 OWNED = 0.9

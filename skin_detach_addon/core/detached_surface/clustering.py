@@ -28,9 +28,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from .geometry import column_max, column_min, face_cross, first_of_each_triple, rows_any, vertex_normals
-from . import threads
-from .threads import map_blocks
+from ..geometry import column_max, column_min, face_cross, first_of_each_triple, rows_any, vertex_normals
+from .. import threads
+from ..threads import map_blocks
 
 #: A component is only clustered when it keeps at least this many faces afterwards.
 MIN_KEPT_FACES = 64
@@ -161,7 +161,7 @@ def _faults(label, rep, triangles, summed, points):
 
 def cluster_mesh(points, triangles, normals, components, graph, area, target_vertices):
     """:class:`Clustered` copy of the mesh with about ``target_vertices`` clusters (``graph``: its
-    :func:`~.geometry.half_edge_graph`, ``area``: its surface area). The cell size is set from
+    :func:`~..geometry.half_edge_graph`, ``area``: its surface area). The cell size is set from
     the area and corrected once from the seed count; then, up to :data:`REPAIR_ROUNDS` times,
     faulty clusters (see :func:`_faults`) are split back into their vertices, so the coarse mesh
     has the detail's topology: a closed detail gives a closed, manifold, consistently facing

@@ -8,8 +8,8 @@ Arrays: ``points`` (n, 3) indexed by vertex id, in the mesh's local space; ``axi
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import SkinDetachError
-from .geometry import bbox_diagonal
+from ..errors import SkinDetachError
+from ..geometry import bbox_diagonal
 
 #: Vertices match their mirror image within this fraction of the bounding-box diagonal.
 MIRROR_TOLERANCE = 1e-4

@@ -17,12 +17,12 @@ import json
 
 import numpy as np
 
-from .errors import SkinDetachError
-from .geometry import half_edge_graph
+from ..errors import SkinDetachError
+from ..geometry import half_edge_graph
 from .prepared_mesh import prepare_mesh
 from .skin import bind_skin, check_coefficients
 from .surface import SkinDetachedSurface, topology_fingerprint
-from .validation import as_points, as_triangles
+from ..validation import as_points, as_triangles
 
 COMPACT_TAG = "skin_detach_compact_surface"
 #: Version of the compact arrays; others are refused.

@@ -19,7 +19,7 @@ iteration, and whatever it does is the work a quiet machine would do with that b
 
 import time
 
-from .errors import SkinDetachError
+from ..errors import SkinDetachError
 
 #: Units a Newton iteration costs besides its conjugate-gradient steps (the rotation fit, the
 #: gradient and volume tangent with their preconditioner solves, the line search): measured 6-16

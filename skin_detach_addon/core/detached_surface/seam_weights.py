@@ -36,12 +36,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from . import threads
-from .geometry import flat_ranges, segment_ranges
+from .. import threads
+from ..geometry import flat_ranges, segment_ranges
 from .held_detail import held_rows
 from .reconstruction import rebuild_matrix, scaled_normals
 from .skin import Skin
-from .threads import map_blocks
+from ..threads import map_blocks
 
 #: One-ring averaging steps of the weights: about how many rings of the detail a weight change spans.
 SEAM_STEPS = 8
@@ -60,7 +60,7 @@ REVERSE_ROWS = 1 << 19
 
 def one_ring(graph):
     """(u, u) CSR of int8 ones: row i holds vertex i and its one-ring neighbours, from the (u, u)
-    ``graph`` of the mesh's directed edges (:func:`.geometry.half_edge_graph`, or any pattern
+    ``graph`` of the mesh's directed edges (:func:`..geometry.half_edge_graph`, or any pattern
     holding either direction of every edge: an edge two faces share, a vertex its own neighbour
     or a repeated face count once). Each row's columns descend: the order in which the
     diffusion adds its terms up, as it always has (the rows of the diagonal scaling's sparse

@@ -11,10 +11,10 @@ proxy bends) the rebuild is X = W [P'; N'] with W (n, m + k) fixed and sparse.
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import SkinDetachError
-from .geometry import face_cross, flat_ranges
-from . import threads
-from .threads import map_blocks
+from ..errors import SkinDetachError
+from ..geometry import face_cross, flat_ranges
+from .. import threads
+from ..threads import map_blocks
 
 
 def scaled_normals(points, triangles):
@@ -66,7 +66,7 @@ class Rebuild:
     and a float32 ``out`` (what Blender stores) runs the product in float32 (half the memory
     traffic; rounding at the level of float32 storage itself).
     One single-vector product per coordinate runs about a third faster than one three-column
-    product in scipy; large meshes split their rows into blocks over :data:`~.threads.WORKERS`
+    product in scipy; large meshes split their rows into blocks over :data:`~..threads.WORKERS`
     threads.
     """
 

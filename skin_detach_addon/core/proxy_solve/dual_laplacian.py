@@ -42,13 +42,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from .errors import SkinDetachError
-from .geometry import barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, unique_edges, unit_rows
+from ..errors import SkinDetachError
+from ..geometry import barycentric, bbox_diagonal, component_labels, cotangent_weights, cross_rows, unique_edges, unit_rows
 from .hessian_factor import HessianFactor, LaggedHessian
 from .projected_newton import largest_step, minimise
 from .pulled_energy import STRENGTH, PulledEnergy
 from .rotated_energy import RotatedEnergy
-from .validation import as_points, as_triangles, as_vertex_ids
+from ..validation import as_points, as_triangles, as_vertex_ids
 from .volume_constraint import VolumeConstraint
 from .work_budget import WorkBudget, WorkRate, cpu_ms
 

@@ -11,7 +11,7 @@ sum of (x_b - x_a) x (x_c - x_a) over the faces (a, b, c) around it.
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import cross_rows, signed_volumes
+from ..geometry import cross_rows, signed_volumes
 
 #: Newton steps on the cubic volume-versus-step polynomial of :meth:`VolumeConstraint.restore`.
 RESTORE_NEWTON_STEPS = 3

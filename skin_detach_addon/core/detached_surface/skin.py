@@ -25,9 +25,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .errors import SkinDetachError
-from .threads import map_blocks
-from .geometry import bbox_diagonal, cross_rows, face_cross, rows_any, segment_ranges, unit_rows, vertex_faces
+from ..errors import SkinDetachError
+from ..threads import map_blocks
+from ..geometry import bbox_diagonal, cross_rows, face_cross, rows_any, segment_ranges, unit_rows, vertex_faces
 
 #: Barycentric tolerance for "the drop point lies in the triangle".
 CONTAIN_EPS = 1e-9

@@ -1,9 +1,10 @@
 """The proxy solves of one binding: which factored solver a solve uses and where it starts.
 
 A solver is a :class:`DualLaplacian` factored for one constraint layout: the constrained proxy
-ids (c,), whether the volume is preserved, and the held detail (a :class:`.held_detail.Layout`).
-A solve follows on from the last two solutions of its own layout (a drag) or starts from rest
-(the same handles give the same shape whatever was solved before: Apply, bake).
+ids (c,), whether the volume is preserved, and the held detail (a
+:class:`..detached_surface.held_detail.Layout`). A solve follows on from the last two solutions
+of its own layout (a drag) or starts from rest (the same handles give the same shape whatever was
+solved before: Apply, bake).
 """
 
 import numpy as np
@@ -56,14 +57,16 @@ def follow_start(recent, ids, targets):
 
 
 class ProxySolves:
-    """The solves of the proxy of ``surface`` (a :class:`.surface.SkinDetachedSurface`, m proxy
-    vertices): a :class:`DualLaplacian` per constraint layout (the last :data:`KEPT_SOLVERS`),
-    each with its recent results (newest first, at most two) that a following solve starts from."""
+    """The solves of the proxy of ``surface`` (a
+    :class:`..detached_surface.surface.SkinDetachedSurface`, m proxy vertices): a
+    :class:`DualLaplacian` per constraint layout (the last :data:`KEPT_SOLVERS`), each with its
+    recent results (newest first, at most two) that a following solve starts from."""
 
     def __init__(self, surface, pulls_of=None):
         self.surface = surface
         #: ``pulls_of(layout)``: the drop-row matrices (s_h, m) of each pair of ``layout.owned``
-        #: (None: the surface's own, :meth:`.surface.SkinDetachedSurface.drop_rows`).
+        #: (None: the surface's own,
+        #: :meth:`..detached_surface.surface.SkinDetachedSurface.drop_rows`).
         self._pulls_of = pulls_of if pulls_of is not None else (
             lambda layout: surface.drop_rows([detail for _, detail in layout.owned], layout.groups))
         #: (ids bytes, preserve_volume, layout key) -> [DualLaplacian, recent results].
@@ -72,10 +75,10 @@ class ProxySolves:
     def solve(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False, layout=None,
               motions=()):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3),
-        the held detail of ``layout`` (a :class:`.held_detail.Layout`; each vertex by the group that
-        owns it, :attr:`~.held_detail.Layout.owned`) pulled along ``motions`` (one (4, 4) per pair
-        of ``layout.held``). With ``follow`` the solve starts from
-        :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
+        the held detail of ``layout`` (a :class:`..detached_surface.held_detail.Layout`; each vertex
+        by the group that owns it, :attr:`~..detached_surface.held_detail.Layout.owned`) pulled
+        along ``motions`` (one (4, 4) per pair of ``layout.held``). With ``follow`` the solve starts
+        from :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
         stops after the work of ``budget_ms`` (None: no limit; ``idle``: see
         :meth:`DualLaplacian.solve`);
         without it from rest, so the same handles give the same shape whatever was solved before."""

@@ -18,9 +18,9 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from .clustering import cluster_mesh
-from . import threads
-from .errors import SkinDetachError
-from .geometry import face_cross, flat_ranges, half_edge_graph, rows_any
+from .. import threads
+from ..errors import SkinDetachError
+from ..geometry import face_cross, flat_ranges, half_edge_graph, rows_any
 from .held_detail import layout_of, owned_pairs
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
@@ -29,7 +29,7 @@ from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
 from .skin import (CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, ProxyFrames, Skin, bind_skin, bound_disagreement,
                    check_coefficients)
-from .validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
+from ..validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
 
 #: Version of the saved format; files of another version are refused.
 FORMAT_VERSION = 1
@@ -267,7 +267,7 @@ class SkinDetachedSurface:
     def prepare_free_rebuild(self, background=None, float32=False):
         """Make the free rebuild (see :meth:`_free_rebuild`) now, or with ``background`` (None: for
         meshes of :data:`BACKGROUND_ABOVE` welded vertices or more) on the background thread
-        (:func:`.threads.background`, one core); :attr:`free_progress` says how far it got,
+        (:func:`..threads.background`, one core); :attr:`free_progress` says how far it got,
         :attr:`free_rebuild_ready` when it is done, and whatever needs it meanwhile waits for it (a
         failure there is raised again by the next call that needs it)."""
         if background is None:
@@ -344,8 +344,8 @@ class SkinDetachedSurface:
         detail vertex ``selections[i][r]`` in a rebuild with the rigid ``groups`` (m,) (see
         :meth:`reconstruct`, without ``held``: where the rebuild would put it from the proxy
         alone), the proxy-vertex part of its rebuild row, which sums to 1 (what
-        :class:`.pulled_energy.PulledEnergy` pulls). The layout's skin is diffused once for all,
-        over the selections' neighbourhood only (:meth:`.seam_weights.SeamWeights.skin_of`)."""
+        :class:`..proxy_solve.pulled_energy.PulledEnergy` pulls). The layout's skin is diffused once
+        for all, over the selections' neighbourhood only (:meth:`.seam_weights.SeamWeights.skin_of`)."""
         selections = [as_vertex_ids("selections", ids, self.n_detail) if np.size(ids) else np.zeros(0, dtype=np.int64)
                       for ids in selections]  # a selection a later group took whole pulls nothing
         seams = self._seam_weights()
@@ -537,7 +537,7 @@ class SkinDetachedSurface:
         that the first :meth:`reconstruct` with it finds its matrix ready (the last two layouts
         prepared or used are kept); ``float32``: also the float32 copy a float32 ``out`` uses
         (:meth:`.reconstruction.Rebuild.float32_blocks`). ``background``: on the background thread
-        (:func:`.threads.background`; a rebuild asking for the layout meanwhile waits for it, and
+        (:func:`..threads.background`; a rebuild asking for the layout meanwhile waits for it, and
         makes it again, raising, if it failed there)."""
         checked = self._checked_layout(groups, held)
 
