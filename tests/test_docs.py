@@ -93,6 +93,8 @@ def test_every_script_option_file_and_make_target_named_exists():
         for span in code(page):
             for path in re.findall(r"\b((?:scripts|farm|docs|bench|tests|skin_detach_addon)/[\w./-]*\w)", span):
                 assert (ROOT / path).exists(), f"{page.name}: {path}"
+            for path in re.findall(r"(?<![\w/])(core/[\w./-]*\w)", span):  # the add-on's core, named short
+                assert (ROOT / "skin_detach_addon" / path).exists(), f"{page.name}: {path}"
             for target in re.findall(r"\bmake ([a-z0-9-]+)\b", span):
                 assert re.search(rf"(?m)^{target}:", makefile), f"{page.name}: make {target}"
             script = re.search(r"\bscripts/(\w+)\.py\b(.*)", span)
