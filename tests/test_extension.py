@@ -1,8 +1,13 @@
 """scripts/build_extension.py: the linux-x64 zip builds, validates, installs into an isolated
 Blender user folder and runs Build + Apply through the installed copy (downloads wheels)."""
 
+import base64
+import csv
+import hashlib
+import io
 import os
 import pathlib
+import re
 import subprocess
 import sys
 import zipfile
@@ -96,6 +101,108 @@ def test_linux_zip_builds_validates_installs_and_runs(extension_zip, tmp_path):
     run = subprocess.run([sys.executable, str(script), str(zips[0])], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0 and "installed extension works" in run.stdout, run.stdout[-2000:] + run.stderr[-2000:]
+
+
+SCIPY_TESTS = re.compile(r"scipy/(?:.+/)?tests/")
+
+#: Run with the slimmed scipy first on the path: the modules the add-on imports, a sparse solve, a
+#: shortest path and a KD-tree query.
+USE_SCIPY = r"""
+import sys
+import numpy as np
+import scipy, scipy.linalg, scipy.sparse, scipy.sparse.csgraph, scipy.sparse.linalg, scipy.spatial
+assert scipy.__file__.startswith(sys.argv[1]), scipy.__file__
+A = scipy.sparse.diags_array([-np.ones(4), 2 * np.ones(5), -np.ones(4)], offsets=[-1, 0, 1], format="csc")
+x = scipy.sparse.linalg.spsolve(A, np.ones(5))
+assert np.allclose(A @ x, 1.0), x
+assert scipy.sparse.csgraph.shortest_path(A != 0, unweighted=True)[0, 4] == 4
+distance, index = scipy.spatial.cKDTree(np.eye(3)).query([0.9, 0.0, 0.0])
+assert index == 0 and abs(distance - 0.1) < 1e-12, (distance, index)
+print("slim scipy works")
+"""
+
+
+def wheel_records(wheel):
+    """{file name: (RECORD's hash, RECORD's size)} of a wheel (a ZipFile) and the name of its RECORD."""
+    [record] = [n for n in wheel.namelist() if re.fullmatch(r"[^/]+\.dist-info/RECORD", n)]
+    rows = list(csv.reader(io.StringIO(wheel.read(record).decode())))
+    return {row[0]: (row[1], row[2]) for row in rows if row}, record
+
+
+def test_the_zips_scipy_wheels_leave_out_scipys_tests_stay_valid_and_import(extension_zip, tmp_path):
+    """Each scipy wheel in the zip is the download less scipy's test suites (same file name, every
+    other entry byte for byte), its RECORD lists exactly the files kept with their real sha256 and
+    sizes; the download in the cache keeps its tests; the wheel for this Python installs with pip
+    and scipy's sparse solve, graph and KD-tree run from it."""
+    zips, folder = extension_zip
+    with zipfile.ZipFile(zips[0]) as archive:
+        wheels = {n.split("/", 1)[1]: archive.read(n) for n in archive.namelist() if n.startswith("wheels/")}
+    scipy_wheels = sorted(n for n in wheels if n.startswith("scipy-"))
+    assert len(scipy_wheels) == 3
+    for name, data in wheels.items():
+        with zipfile.ZipFile(io.BytesIO(data)) as wheel, zipfile.ZipFile(folder / "wheels" / name) as download:
+            names = wheel.namelist()
+            assert not [n for n in names if SCIPY_TESTS.match(n)], name
+            left_out = [n for n in download.namelist() if SCIPY_TESTS.match(n)]
+            assert bool(left_out) == name.startswith("scipy-"), (name, len(left_out))
+            assert names == [n for n in download.namelist() if n not in left_out]
+            assert all(wheel.getinfo(n).CRC == download.getinfo(n).CRC for n in names if not n.endswith("/RECORD"))
+            records, record = wheel_records(wheel)
+            assert records.pop(record) == ("", "")
+            files = {n for n in names if not n.endswith("/")} - {record}
+            assert set(records) == files, (name, sorted(set(records) ^ files)[:5])
+            for member, (digest, size) in records.items():
+                content = wheel.read(member)
+                expected = base64.urlsafe_b64encode(hashlib.sha256(content).digest()).rstrip(b"=").decode()
+                assert (digest, size) == ("sha256=" + expected, str(len(content))), (name, member)
+            if name.startswith("scipy-"):
+                assert "scipy/_lib/_testutils.py" in names  # scipy/__init__ imports it
+                assert set(wheel_records(download)[0]) - set(records) - {record} == {
+                    n for n in left_out if not n.endswith("/")}
+
+    tag = "cp%d%d" % sys.version_info[:2]
+    mine = [n for n in scipy_wheels if f"-{tag}-" in n]
+    if not mine:
+        pytest.skip(f"the zip has no scipy wheel for this Python ({tag}) to install")
+    (tmp_path / mine[0]).write_bytes(wheels[mine[0]])
+    target = tmp_path / "site"
+    pip = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index", "--no-compile",
+                          "--target", str(target), str(tmp_path / mine[0])],
+                         capture_output=True, text=True, timeout=600)
+    assert pip.returncode == 0, pip.stdout + pip.stderr
+    assert not list(target.glob("scipy/**/tests"))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PYTHONPATH"] = str(target)
+    run = subprocess.run([sys.executable, "-c", USE_SCIPY, str(target)], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and "slim scipy works" in run.stdout, run.stdout + run.stderr
+
+
+def test_slimming_refuses_a_wheel_whose_record_disagrees_with_its_content(tmp_path):
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("build_extension", ROOT / "scripts" / "build_extension.py")
+    build_extension = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build_extension)
+    source = tmp_path / "scipy-1.0-cp311-cp311-any.whl"
+    files = {"scipy/__init__.py": b"x = 1\n", "scipy/tests/test_x.py": b"", "scipy/sub/tests/data.txt": b"t",
+             "scipy/sub/tests.py": b"y = 2\n"}
+    record = "".join(f"{n},{build_extension.record_hash(d)},{len(d)}\n" for n, d in files.items())
+    with zipfile.ZipFile(source, "w") as wheel:
+        for name, data in files.items():
+            wheel.writestr(name, data)
+        wheel.writestr("scipy-1.0.dist-info/RECORD", record + "scipy-1.0.dist-info/RECORD,,\n")
+    slim = tmp_path / "slim.whl"
+    assert build_extension.slim_wheel(source, slim, build_extension.LEFT_OUT["scipy"]) == 2
+    with zipfile.ZipFile(slim) as wheel:
+        assert wheel.namelist() == ["scipy/__init__.py", "scipy/sub/tests.py", "scipy-1.0.dist-info/RECORD"]
+        kept = {n: build_extension.record_hash(files[n]) for n in ("scipy/__init__.py", "scipy/sub/tests.py")}
+        assert wheel.read("scipy-1.0.dist-info/RECORD").decode().splitlines() == [
+            f"scipy/__init__.py,{kept['scipy/__init__.py']},6", f"scipy/sub/tests.py,{kept['scipy/sub/tests.py']},6",
+            "scipy-1.0.dist-info/RECORD,,"]
+    with zipfile.ZipFile(source, "a") as wheel:
+        wheel.writestr("scipy/extra.py", b"")  # a file its RECORD does not list
+    with pytest.raises(build_extension.BuildFailed, match="scipy/extra.py as its RECORD lists it, None"):
+        build_extension.slim_wheel(source, slim, build_extension.LEFT_OUT["scipy"])
 
 
 def test_every_platform_builds_and_validates_with_its_own_pythons_wheels(tmp_path):
