@@ -48,7 +48,7 @@ THIN = 0.02
 MOVED = 0.05
 #: Vertices this close (a fraction of the proxy's bounding-box diagonal) are one point: merged
 #: wherever the mesh stays manifold.
-COINCIDENT = 1e-9
+COINCIDENT = 1e-6
 #: A flip raises the least angle of its two faces by more than this (degrees).
 GAIN_DEGREES = 0.5
 #: A vertex is relaxed only where its faces' normals lie within this of its own (degrees).
