@@ -51,6 +51,7 @@ bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_drag.py --busy --json bench/results/drag.json
 	$(PY) scripts/benchmark_quality.py --poses 100 --json bench/results/quality.json
 	$(PY) scripts/benchmark_quality.py --rigs --json bench/results/rigs.json
+	$(PY) scripts/benchmark_quality.py --proxy-angles --json bench/results/proxy_angles.json
 	$(PY) scripts/benchmark_page.py
 
 extension: $(VENV)/.installed

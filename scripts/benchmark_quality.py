@@ -4,6 +4,8 @@
                                         [--pose-meshes armadillo,spot,cow] [--faces 1000] [--json PATH]
     python scripts/benchmark_quality.py --rigs [armadillo,armadillo-300K] [--rig-faces 300,1000]
                                         [--face-handles 48] [--face-drags 4] [--moves 30] [--json PATH]
+    python scripts/benchmark_quality.py --proxy-angles [--meshes ...] [--sizes 25000,300000] [--faces 1000]
+                                        [--json PATH]
 
 Pose suite (bench/poses.py): random handle poses (axis random, up to 90 degrees, shift up to 10 %
 of the diagonal), each solved warm (from the previous pose, as dragging does) and cold at
@@ -23,6 +25,14 @@ paper's iteration; beside Blender's own stack (Decimate
 to our proxy's face count + Hook + Laplacian Deform + Surface Deform, where the bpy module is
 there and Surface Deform binds) and full-resolution ARAP (libigl, 20 iterations, dev-only).
 Totals over the meshes close the table.
+
+Proxy triangles (``--proxy-angles``, in place of the above; issue 45): the proxy's shape on every
+mesh at each of ``--sizes`` (every edge split evenly until the mesh has at least that many
+vertices, bench.meshes.split_edges: its flat triangles keep their shapes) and on the demo's 300K
+armadillo (turned Z-up as the demo turns it): proxy faces, least and largest angle, the share of faces with an angle under 10 degrees
+and how many have one under 1 degree or over 170, beside Blender's Decimate (collapse) of the same
+mesh to the same face count where the bpy module is there, and the goals (no angle under 1 degree,
+at most 1 % of faces under 10).
 
 Rigs (``--rigs``, in place of the above; the bpy module; issue 43): the rigs artists build, on
 each mesh and proxy size (``--rig-faces``: a coarse proxy puts more of a selection's proxy faces
@@ -62,11 +72,13 @@ from bench.rigs import base, failed_goals, falloff, head, held_errors, limb, mak
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
+from skin_detach_addon.core.detached_surface.sliver_repair import face_angles
 from skin_detach_addon.core.detached_surface.seam_weights import SEAM_STEPS
 from skin_detach_addon.core.detached_surface.stretch import SkinStretch
 
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 RIG_MESHES = "armadillo,armadillo-300K"
+ANGLE_MESHES = "alligator,armadillo,bunny,cheburashka,cow,fandisk,homer,rocker-arm,spot,horse,ogre,beetle-alt"
 
 
 def mesh(name, at_least):
@@ -387,6 +399,74 @@ def run_rigs(args):
     return rows
 
 
+def angle_figures(points, triangles):
+    """Least / largest angle (degrees), % of faces under 10 degrees, faces under 1 and over 170."""
+    angles = face_angles(points, triangles)
+    least, largest = angles.min(axis=1), angles.max(axis=1)
+    return dict(faces=int(triangles.shape[0]), least=float(least.min()), largest=float(largest.max()),
+                under_10_pct=100 * float(np.mean(least < 10.0)), under_1=int(np.sum(least < 1.0)),
+                over_170=int(np.sum(largest > 170.0)))
+
+
+def decimated(points, triangles, faces):
+    """(points, triangles) of Blender's Decimate (collapse, triangulated) of the mesh to ``faces``
+    triangles, or None without the bpy module."""
+    try:
+        import bpy
+    except ImportError:
+        return None
+    from bench.meshes import blender_mesh
+    bpy.ops.wm.read_homefile(use_empty=True)
+    obj = blender_mesh("decimated", points, triangles)
+    modifier = obj.modifiers.new("decimate", 'DECIMATE')
+    modifier.ratio = faces / triangles.shape[0]
+    modifier.use_collapse_triangulate = True
+    mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
+    out_points = np.array([v.co[:] for v in mesh.vertices])
+    out_faces = np.array([p.vertices[:] for p in mesh.polygons if len(p.vertices) == 3], dtype=np.int64)
+    return out_points, out_faces
+
+
+def proxy_angle_rows(args):
+    """The proxy triangles table (see the module): a row per mesh and size."""
+    from bench.meshes import armadillo, split_edges
+    print(f"## Proxy triangles (proxy target {args.faces} faces; goals: no angle under 1 degree, "
+          "at most 1 % of faces under 10)\n")
+    print("| mesh | vertices | proxy faces | least angle | largest angle | faces < 10 deg | faces < 1 deg "
+          "| faces > 170 deg | goals | Decimate: least angle / < 10 deg |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    cases = []
+    for name in [n for n in args.meshes.split(",") if n]:
+        points, triangles = named(name)
+        for size in [int(s) for s in args.sizes.split(",") if s]:
+            parts = 1
+            while points.shape[0] * parts * parts < size:
+                parts += 1
+            cases.append((name, lambda p=points, t=triangles, k=parts: split_edges(p, t, k) if k > 1 else (p, t)))
+    demo = armadillo("300K")  # as scripts/demo.py turns it: OBJ's Y-up to Blender's Z-up
+    cases.append(("armadillo (demo 300K)", lambda: (demo[0][:, [0, 2, 1]] * [1, -1, 1], demo[1])))
+    rows = []
+    for name, make_mesh in cases:
+        points, triangles = make_mesh()
+        points = points.astype(np.float32).astype(np.float64)
+        surface = SkinDetachedSurface.build(points, triangles, target_faces=args.faces)
+        row = dict(mesh=name, vertices=int(points.shape[0]),
+                   **angle_figures(surface.proxy_vertices, surface.proxy_faces))
+        row["goals_met"] = row["under_1"] == 0 and row["under_10_pct"] <= 1.0
+        blender = decimated(points, triangles, row["faces"])
+        if blender is not None:
+            row["decimate"] = angle_figures(*blender)
+        rows.append(row)
+        other = (f"{row['decimate']['least']:.2f} / {row['decimate']['under_10_pct']:.1f} %" if "decimate" in row
+                 else "-")
+        print(f"| {name} | {row['vertices']:,} | {row['faces']} | {row['least']:.2f} | {row['largest']:.1f} | "
+              f"{row['under_10_pct']:.1f} % | {row['under_1']} | {row['over_170']} | "
+              f"{'met' if row['goals_met'] else 'NOT met'} | {other} |", flush=True)
+    met = sum(row["goals_met"] for row in rows)
+    print(f"\ngoals met on {met} of {len(rows)}")
+    return rows
+
+
 def totals(rows):
     """Per method: meshes, total creases and mean dihedral change over the meshes every method has."""
     meshes = set.intersection(*[{r["mesh"] for r in rows if r["method"] == m} for m in {r["method"] for r in rows}])
@@ -411,8 +491,18 @@ def main():
     parser.add_argument("--face-handles", type=int, default=48, help="rigs: handles of the face rig")
     parser.add_argument("--face-drags", type=int, default=4, help="rigs: face handles dragged")
     parser.add_argument("--moves", type=int, default=30, help="rigs: mouse moves of a drag")
+    parser.add_argument("--proxy-angles", action="store_true", help="the proxy triangles table instead of the "
+                        "pose suite and the bend")
+    parser.add_argument("--sizes", default="25000,300000", help="proxy angles: mesh sizes (vertices at least)")
     parser.add_argument("--json")
     args = parser.parse_args()
+    if args.proxy_angles:
+        if args.meshes == MESHES:
+            args.meshes = ANGLE_MESHES
+        rows = proxy_angle_rows(args)
+        if args.json:
+            report.save(args.json, {"proxy_angles": rows})
+        return
     if args.rigs:
         figures = {"rigs": run_rigs(args)}
         if args.json:

@@ -85,7 +85,8 @@ def main():
     stats = api.build(obj, target_faces=args.target)
     build_s = time.perf_counter() - start
     print(f"build: {build_s:.2f} s (core {stats['seconds']['total']:.2f} s) -> proxy of "
-          f"{stats['proxy_vertices']:,} vertices / {stats['proxy_faces']:,} faces")
+          f"{stats['proxy_vertices']:,} vertices / {stats['proxy_faces']:,} faces, least angle "
+          f"{stats['proxy_least_angle']:.1f} degrees, {stats['proxy_slivers']} faces under 10 or over 170")
 
     scenario = bend_scenario(points)
     api.add_anchor(obj, scenario.anchor_ids)
@@ -109,7 +110,8 @@ def main():
     figures = {"detail_vertices": int(points.shape[0]), "proxy_faces": int(stats["proxy_faces"]),
                "build_seconds": build_s, "drag_step_ms_median": median, "drag_steps": args.steps,
                "settle_iterations": settle["iterations"], "settle_converged": settle["converged"],
-               "proxy_volume_change": settle["volume_change"]}
+               "proxy_volume_change": settle["volume_change"], "proxy_least_angle": stats["proxy_least_angle"],
+               "proxy_slivers": stats["proxy_slivers"]}
     (out / "demo_figures.json").write_text(json.dumps(figures, indent=2))
     print(f"wrote {out / 'demo.blend'}, {obj_file}, {out / 'demo.png'}, {out / 'demo_figures.json'}")
 

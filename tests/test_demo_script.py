@@ -22,6 +22,7 @@ def test_demo_writes_blend_obj_picture_and_figures(tmp_path):
     assert figures["detail_vertices"] == 49990 and 900 <= figures["proxy_faces"] <= 1200
     for key in ("build_seconds", "drag_step_ms_median", "proxy_volume_change"):
         assert math.isfinite(figures[key]), key
+    assert 1.0 <= figures["proxy_least_angle"] < 60.0 and 0 <= figures["proxy_slivers"] <= 0.01 * figures["proxy_faces"]
     assert (tmp_path / "demo.blend").stat().st_size > 1e6
     obj = (tmp_path / "armadillo_deformed_0001.obj").read_text()
     assert obj.count("\nv ") == 49990

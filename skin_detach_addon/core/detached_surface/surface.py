@@ -27,6 +27,7 @@ from .prepared_mesh import prepare_mesh
 from .reconstruction import LayoutRebuild, Rebuild, rebuild_matrix
 from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
+from .sliver_repair import face_angles, is_sliver, repair_slivers
 from .skin import (CASE_LOOSE, CASE_ONE, CASE_THREE, CASE_TWO, ProxyFrames, Skin, bind_skin, bound_disagreement,
                    check_coefficients)
 from ..validation import as_points, as_preview_vertices, as_target_faces, as_triangles, as_vertex_ids
@@ -442,6 +443,10 @@ class SkinDetachedSurface:
             remap = checked.remap
             carrier = np.where(carrier >= 0, remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
+        # The collapses' needles and caps taken out: flipped, merged, their vertices moved.
+        proxy_points, proxy_faces, merged = repair_slivers(proxy_points, proxy_faces)
+        remap = merged[remap]
+        carrier = np.where(carrier >= 0, merged[np.maximum(carrier, 0)], -1)
         mesh.cross = mesh.triangles = None  # binding needs points and normals only (the graph: the seams)
         tested = time.perf_counter()
         report(0.7, "binding the skin")
@@ -462,6 +467,7 @@ class SkinDetachedSurface:
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
         ring_share = ring_disagree.sum() / with_normal
         counts = np.bincount(skin.case, minlength=5)
+        angles = face_angles(proxy_points, proxy_faces)
         stats = {
             "detail_vertices": n_detail,
             "detail_faces": n_faces,
@@ -480,6 +486,8 @@ class SkinDetachedSurface:
             "components_kept_whole": proxy.kept_whole,
             "normal_test": bool(normal_test),
             "normal_test_refused": int(refused),
+            "proxy_least_angle": float(angles.min(initial=180.0)),
+            "proxy_slivers": int(is_sliver(angles).sum()),
             "normal_disagree_bound": float(bound_share),
             "normal_disagree_ring": float(ring_share),
             "preview_vertices": 0 if preview is None else int(preview.points.shape[0]),
