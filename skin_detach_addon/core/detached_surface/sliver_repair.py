@@ -33,7 +33,7 @@ slivers and their neighbours change, so a proxy without slivers comes back as it
 
 import numpy as np
 
-from ..geometry import bbox_diagonal, cross_rows, face_cross, unique_edges, unit_rows
+from ..geometry import bbox_diagonal, cross_rows, face_cross, unique_edges, unit_rows, vertex_faces
 
 #: A face whose least angle is under this is a sliver (degrees).
 SLIVER_DEGREES = 10.0
@@ -199,8 +199,9 @@ def collapse_slivers(points, triangles):
     for _ in range(PASSES):
         live = np.flatnonzero(alive)
         angles = face_angles(points, faces[live])
-        slivers = live[is_sliver(angles)]
-        order = np.argsort(angles[is_sliver(angles)].min(axis=1), kind="stable")
+        sliver = is_sliver(angles)
+        slivers = live[sliver]
+        order = np.argsort(angles[sliver].min(axis=1), kind="stable")
         merged = 0
         for sliver in slivers[order].tolist():
             if not alive[sliver]:
@@ -285,16 +286,13 @@ def relax_slivers(points, triangles, border):
     moves. ``border`` (m,) bool: border vertices stay. The input is not changed."""
     points = np.array(points, dtype=np.float64, copy=True)
     faces = np.asarray(triangles, dtype=np.int64)
-    around = [[] for _ in range(points.shape[0])]
-    for index, face in enumerate(faces.tolist()):
-        for vertex in face:
-            around[vertex].append(index)
+    indptr, around = vertex_faces(faces, points.shape[0])
     flat = np.cos(np.radians(RELAX_FLAT_DEGREES))
     for _ in range(PASSES):
         chosen = np.unique(faces[is_sliver(face_angles(points, faces))])
         moved = 0
         for vertex in chosen[~border[chosen]].tolist():
-            own = faces[around[vertex]]
+            own = faces[around[indptr[vertex]:indptr[vertex + 1]]]
             areas = face_cross(points, own)
             normal, sizes = areas.sum(axis=0), np.linalg.norm(areas, axis=1)
             length = _length(normal)
