@@ -374,7 +374,7 @@ def open_binding(obj):
     in this session is made now (or, when the background thread is making it, waited for, the
     window's progress shown); a record of schema 1 is rewritten compact (schema 2) once, said on
     the console. A preparation of the binding running in the background is waited for."""
-    triangles = mesh_io.read_triangles(obj.data) if _needs_opening(obj) else None  # with the fingerprint
+    triangles = _early_triangles(obj)
     props, binding_id, proxy = _checked_record(obj)
     binding = _CACHE.get(binding_id)
     if binding is None:
@@ -400,8 +400,7 @@ def begin_opening(obj):
     """Start making the :class:`Binding` of ``obj`` on the background thread (its record and mesh
     read here, checked as :func:`open_binding` checks them); returns the :class:`Opening`, or None
     when the binding is made already. :func:`open_binding` finishes it on the main thread."""
-    # The triangles read first: the record's check then finds the fingerprint made from them.
-    triangles = mesh_io.read_triangles(obj.data) if _needs_opening(obj) else None
+    triangles = _early_triangles(obj)
     props, binding_id, _ = _checked_record(obj)
     if binding_id in _CACHE:
         return None
@@ -410,6 +409,15 @@ def begin_opening(obj):
         opening = _PENDING[binding_id] = Opening(obj, props, binding_id, triangles)
         opening.start()
     return opening
+
+
+def _early_triangles(obj):
+    """The triangles of a mesh of triangles only whose binding is to be made, read before its
+    record is checked (the check then finds the fingerprint made from the same read), else None: a
+    mesh of quads or ngons is split as its rest shape splits, once the rest is read (:class:`Opening`)."""
+    if _needs_opening(obj) and mesh_io.triangles_only(obj.data):
+        return mesh_io.read_triangles(obj.data)
+    return None
 
 
 def _needs_opening(obj):
@@ -444,7 +452,9 @@ class Opening:
         self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
                         if key not in ("proxy", "preview", STORE)}
         self.rest = np.array(_checked_rest(obj, stored_arrays, len(obj.data.vertices)))  # its own, not Blender's
-        self._triangles = mesh_io.read_triangles(obj.data) if triangles is None else triangles
+        # Quads and ngons split as the rest shape splits (the skin was bound over those): a posed
+        # quad mesh's own split differs where a quad folded across its first diagonal.
+        self._triangles = mesh_io.read_triangles(obj.data, self.rest) if triangles is None else triangles
         self.fraction, self.stage = 0.0, "reading"
         self._future = None
 

@@ -25,19 +25,48 @@ def read_positions(mesh):
     return out
 
 
-def read_triangles(mesh):
+def read_triangles(mesh, positions=None):
     """(t, 3) int32 loop triangles of ``mesh`` (Blender's own index type: half the memory of
     int64 on millions of faces; the core makes the int64 copy it works on and frees it). A mesh of
     triangles only has its corners read (through a throw-away copy, see :func:`read_shared`),
     and its :func:`mesh_fingerprint` is kept from the same read (at 10M vertices each read of
-    the corners held the main thread 0.4-0.6 s)."""
+    the corners held the main thread 0.4-0.6 s).
+
+    Blender splits a quad or an ngon into triangles by its shape (a quad folded across its first
+    diagonal is split along the other), so a posed mesh's loop triangles are not its rest's. The
+    skin is bound over the triangles of the shape it was built from: ``positions`` (n, 3), the
+    rest positions, gives the loop triangles Blender makes of the mesh in that shape (read from a
+    throw-away copy holding them), the same whatever pose the mesh is in now. Without it, the
+    mesh's current shape is split."""
     counts = _counts(mesh)
-    if counts[2] == 3 * counts[1]:  # every face is a triangle (each has at least 3 corners)
+    if triangles_only(mesh):
         out = np.empty(counts[2], dtype=np.int32)
         if out.size:
             read_shared(mesh, lambda copy: copy.attributes[".corner_vert"].data.foreach_get("value", out))
         _FINGERPRINTS.setdefault(mesh.as_pointer(), (counts, _fingerprint_of(counts, out)))
         return out.reshape(-1, 3)
+    if positions is None:
+        return _loop_triangles(mesh)
+    shape = np.ascontiguousarray(positions, dtype=np.float32)
+    if shape.shape != (counts[0], 3):
+        raise SkinDetachError(f"positions: expected ({counts[0]}, 3) rest positions of mesh {mesh.name!r}, "
+                              f"got {shape.shape}")
+
+    def split(copy):
+        copy.attributes["position"].data.foreach_set("vector", shape.ravel())
+        copy.vertices[0].co = copy.vertices[0].co  # tags the copy: its split is made anew, not shared
+        return _loop_triangles(copy)
+    return read_shared(mesh, split)
+
+
+def triangles_only(mesh):
+    """Whether every face of ``mesh`` is a triangle (each face has at least 3 corners): its loop
+    triangles are its faces, whatever its shape."""
+    return len(mesh.loops) == 3 * len(mesh.polygons)
+
+
+def _loop_triangles(mesh):
+    """(t, 3) int32 loop triangles of ``mesh`` as Blender splits its current shape."""
     mesh.calc_loop_triangles()
     out = np.empty(len(mesh.loop_triangles) * 3, dtype=np.int32)
     mesh.loop_triangles.foreach_get("vertices", out)

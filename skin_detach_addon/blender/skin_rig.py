@@ -146,11 +146,13 @@ class BuildJob:
         mesh = obj.data
         self.name, self._pointer = obj.name, obj.as_pointer()
         held = mesh_io.read_positions(mesh)
-        self.triangles = mesh_io.read_triangles(mesh)  # first: the fingerprint is made from the same read
-        self._read = (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(held))
         self.shown_pose = positions is not None
         self.positions = held if positions is None else np.ascontiguousarray(positions, dtype=np.float32)
         mesh_io.check_positions(f"mesh {mesh.name!r}", self.positions)
+        # Quads and ngons split as the bound shape splits (what reopening the file splits again);
+        # first: the fingerprint is made from the same read.
+        self.triangles = mesh_io.read_triangles(mesh, self.positions if self.shown_pose else None)
+        self._read = (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(held))
         self.target_faces, self.normal_test = target_faces, normal_test
         self.preview_vertices = None
         n = self.positions.shape[0]
