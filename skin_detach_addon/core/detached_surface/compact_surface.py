@@ -54,7 +54,7 @@ def compact_arrays(surface):
     return {"format_tag": np.array(COMPACT_TAG), "format_version": np.array(COMPACT_VERSION),
             "proxy_vertices": surface.proxy_vertices, "proxy_faces": surface.proxy_faces.astype(np.int32),
             "carrier": narrowest(surface.carrier, -1, m - 1), "fingerprint": np.array(surface.fingerprint),
-            "stats": np.array(json.dumps(surface.stats))}
+            "stats": np.array(json.dumps(surface.stats)), **surface.rider_arrays()}
 
 
 def surface_from_compact(arrays, points, triangles, source="arrays", progress=None):
@@ -98,6 +98,14 @@ def surface_from_compact(arrays, points, triangles, source="arrays", progress=No
         edges = edges + half_edge_graph(mesh.degenerate, u)
     del mesh
     surface.attach_topology(faces, edges)
+    if "rider_ids" in arrays:
+        try:
+            ids = np.asarray(arrays["rider_ids"]).astype(np.int64).ravel()
+            starts = np.asarray(arrays["rider_starts"]).astype(np.int64).ravel()
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SkinDetachError(f"{source}: expected rider_ids and rider_starts, got malformed data "
+                                  f"({type(exc).__name__}: {exc}); rebuild the skin") from None
+        surface.set_riders(ids, starts, points)
     report(STAGES[1][1], "done")
     return surface
 

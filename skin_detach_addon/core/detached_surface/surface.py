@@ -25,6 +25,7 @@ from .held_detail import layout_of, owned_pairs
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import LayoutRebuild, Rebuild, rebuild_matrix
+from .riders import RigidRiders, find_riders, ride_carriers, rider_groups
 from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
 from .sliver_repair import face_angles, is_sliver, repair_slivers
@@ -155,9 +156,12 @@ class SkinDetachedSurface:
     fingerprint     str, topology of the detail mesh it was built from
     stats           dict of counts, timings and normal-test figures
     preview         :class:`Preview` or None (set by :meth:`build` with ``preview_vertices``)
+    riders          :class:`.riders.RigidRiders` or None: loose parts riding on others, each moved
+                    rigidly onto where the skin puts it (set by :meth:`set_riders`)
     """
 
     preview = None
+    riders = None
 
     def __init__(self, proxy_vertices, proxy_faces, weld, carrier, skin, fingerprint, stats):
         self.proxy_vertices = proxy_vertices
@@ -381,7 +385,8 @@ class SkinDetachedSurface:
         return self.weld.shape[0]
 
     @classmethod
-    def build(cls, vertices, triangles, target_faces=1000, normal_test=True, preview_vertices=None, progress=None):
+    def build(cls, vertices, triangles, target_faces=1000, normal_test=True, preview_vertices=None, progress=None,
+              attach=None, detach=None):
         """Simplify, detach the skin and prepare the rebuild of a triangle mesh.
 
         ``vertices`` (n, 3) float, ``triangles`` (f, 3) int indices into ``vertices``.
@@ -390,6 +395,9 @@ class SkinDetachedSurface:
         clustered mesh, which is much faster on millions of faces, and the clustered mesh, bound
         to the same proxy, becomes :attr:`preview`. The detail's skin is bound as without it.
         ``progress``, if given, is called as ``progress(fraction, stage)`` before each stage.
+        Loose parts that touch a larger part ride on it (:mod:`.riders`): they get no proxy of their
+        own and their skin binds to the proxy under them. ``attach`` and ``detach`` (k,) vertex ids
+        (or None) name parts the artist made riders or free whatever they touch.
         """
         report = progress if progress is not None else (lambda fraction, stage: None)
         start = time.perf_counter()
@@ -400,6 +408,8 @@ class SkinDetachedSurface:
         preview_vertices = as_preview_vertices(preview_vertices)
         if not isinstance(normal_test, (bool, np.bool_)):
             raise SkinDetachError(f"normal_test: expected True or False, got {normal_test!r}")
+        attach, detach = (None if ids is None else as_vertex_ids(name, ids, points.shape[0])
+                          for name, ids in (("attach", attach), ("detach", detach)))
 
         mesh = prepare_mesh(points, faces)
         if mesh.triangles.shape[0] == 0:
@@ -408,6 +418,8 @@ class SkinDetachedSurface:
         n_detail, n_faces = points.shape[0], faces.shape[0]
         fingerprint = topology_fingerprint(n_detail, faces)
         n_components = int(np.count_nonzero(np.bincount(mesh.components[mesh.triangles[:, 0]])))
+        riders = find_riders(mesh.points, mesh.triangles, mesh.components,
+                             *(None if ids is None else mesh.weld[ids] for ids in (attach, detach)))
         del points, faces  # the prepared mesh holds what is still needed (often the same arrays)
         prepared = time.perf_counter()
         clustered = None
@@ -420,11 +432,15 @@ class SkinDetachedSurface:
         report(0.2, "simplifying")
         oversample = (CLUSTERED_OVERSAMPLE if clustered is not None else NORMAL_TEST_OVERSAMPLE) if normal_test else 1.0
         if clustered is None:
-            proxy = simplify(mesh.points, mesh.triangles, mesh.components, target, oversample)
+            free = riders.free_faces(mesh.triangles, mesh.components)
+            proxy = simplify(mesh.points, mesh.triangles if free.all() else mesh.triangles[free], mesh.components,
+                             target, oversample)
             carrier = proxy.carrier
         else:
             # The library simplifies the clustered mesh; detail vertex -> cluster -> proxy vertex.
-            proxy = simplify(clustered.points, clustered.triangles, clustered.components, target, oversample)
+            free = riders.free_faces(clustered.triangles, clustered.components)
+            proxy = simplify(clustered.points, clustered.triangles if free.all() else clustered.triangles[free],
+                             clustered.components, target, oversample)
             carrier = follow_nearest(proxy.carrier[clustered.cluster], mesh.triangles, mesh.points, proxy.points)
             mesh.cross = None  # the detail's quadrics come from the clustered copy: not needed
         simplified = time.perf_counter()
@@ -448,6 +464,7 @@ class SkinDetachedSurface:
         remap = merged[remap]
         carrier = np.where(carrier >= 0, merged[np.maximum(carrier, 0)], -1)
         mesh.cross = mesh.triangles = None  # binding needs points and normals only (the graph: the seams)
+        carrier = ride_carriers(riders, mesh.points, carrier)  # riders: carried by the proxy under them
         tested = time.perf_counter()
         report(0.7, "binding the skin")
 
@@ -455,6 +472,8 @@ class SkinDetachedSurface:
         preview = None
         if clustered is not None:
             preview_carrier = np.where(proxy.carrier >= 0, remap[np.maximum(proxy.carrier, 0)], -1)
+            preview_carrier = ride_carriers(riders, clustered.points, preview_carrier,
+                                            riders.part[clustered.representatives])
             preview_skin = bind_skin(clustered.points, clustered.normals, preview_carrier, proxy_points,
                                      proxy_faces)[0]
             c = clustered.points.shape[0]
@@ -462,6 +481,9 @@ class SkinDetachedSurface:
                               cls(proxy_points, proxy_faces, np.arange(c), preview_carrier, preview_skin,
                                   topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}),
                               clustered.representatives)
+            if riders.riding.any():
+                preview.surface.set_riders(*rider_groups(riders, riders.part[clustered.representatives]),
+                                           clustered.points)
         bound = time.perf_counter()
         with_normal = max(int(rows_any(mesh.normals).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
@@ -484,6 +506,7 @@ class SkinDetachedSurface:
             "dropped_faces": mesh.dropped_faces,
             "components": n_components,
             "components_kept_whole": proxy.kept_whole,
+            **riders.summary(),
             "normal_test": bool(normal_test),
             "normal_test_refused": int(refused),
             "proxy_least_angle": float(angles.min(initial=180.0)),
@@ -495,6 +518,8 @@ class SkinDetachedSurface:
         }
         report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
+        if riders.riding.any():
+            surface.set_riders(*rider_groups(riders, riders.part[mesh.weld]), mesh.points[mesh.weld])
         edges = mesh.graph
         if mesh.degenerate.size:
             edges = edges + half_edge_graph(mesh.degenerate, mesh.points.shape[0])
@@ -538,7 +563,43 @@ class SkinDetachedSurface:
         if place is not None and held is None:
             raise SkinDetachError("place: expected held detail (pairs of group label and detail ids) with it, got none")
         rebuild = self._rebuild_for(groups, held)
-        return rebuild(points, out=out) if groups is None else rebuild(points, out=out, place=place)
+        result = rebuild(points, out=out) if groups is None else rebuild(points, out=out, place=place)
+        if self.riders is not None:
+            self._rigid_riders().place(result, keep=self._riders_held(held))
+        return result
+
+    def set_riders(self, ids, starts, rest=None):
+        """Make the riders keep their shape (:class:`.riders.RigidRiders`): ``ids`` (r,) detail
+        vertex ids rider after rider, ``starts`` (k + 1,) their bounds, ``rest`` (n, 3) the detail's
+        rest positions (None: the rebuild of the rest proxy, made on first use)."""
+        ids = as_vertex_ids("rider_ids", ids, self.n_detail)
+        starts = np.asarray(starts, dtype=np.int64).ravel()
+        if starts.size < 1 or starts[0] != 0 or starts[-1] != ids.size or (np.diff(starts) <= 0).any():
+            raise SkinDetachError(f"rider_starts: expected increasing bounds from 0 to {ids.size}, got "
+                                  f"{starts[:4].tolist()}...{starts[-2:].tolist()}")
+        self.riders = (ids, starts, rest)
+        self._riders_by_held = (None, None)
+
+    def _rigid_riders(self):
+        if not isinstance(self.riders, RigidRiders):
+            ids, starts, rest = self.riders
+            if rest is None:
+                self.riders = None  # the rest as the skin rebuilds it, riders not yet placed
+                rest = self.reconstruct(self.proxy_vertices)
+            free = np.ones(self.n_detail, dtype=bool)
+            free[ids] = False
+            self.riders = RigidRiders(rest, ids, starts, free)
+        return self.riders
+
+    def _riders_held(self, held):
+        """(k,) bool: riders ``held`` holds some vertex of (they follow their handle, not a fit);
+        kept for the last held pairs (a drag asks with the same arrays every move)."""
+        if not held:
+            return None
+        key = tuple((label, id(ids)) for label, ids in held)
+        if self._riders_by_held[0] != key:
+            self._riders_by_held = (key, self._rigid_riders().holding(held))
+        return self._riders_by_held[1]
 
     def prepare_layout(self, groups=None, held=None, float32=False, background=False):
         """Prepare the rebuild of a layout (``groups``, ``held`` as for :meth:`reconstruct`) now, so
@@ -621,7 +682,16 @@ class SkinDetachedSurface:
                       proxy_vertices=self.proxy_vertices, proxy_faces=self.proxy_faces, weld=self.weld,
                       carrier=self.carrier, fingerprint=np.array(self.fingerprint),
                       stats=np.array(json.dumps(self.stats)))
+        arrays.update(self.rider_arrays())
         return arrays
+
+    def rider_arrays(self):
+        """{"rider_ids", "rider_starts"} of :meth:`set_riders`, or {} without riders."""
+        if self.riders is None:
+            return {}
+        riders = self.riders
+        ids, starts = (riders.ids, riders.starts) if isinstance(riders, RigidRiders) else riders[:2]
+        return {"rider_ids": ids, "rider_starts": starts}
 
     @classmethod
     def from_arrays(cls, arrays, source="arrays"):
@@ -675,7 +745,10 @@ class SkinDetachedSurface:
         stats = json.loads(str(arrays["stats"]))
         if not isinstance(stats, dict):
             raise SkinDetachError(f"{source}: expected the build figures as a JSON object, got {type(stats).__name__}")
-        return cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin, str(arrays["fingerprint"]), stats)
+        surface = cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin, str(arrays["fingerprint"]), stats)
+        if "rider_ids" in arrays:
+            surface.set_riders(index("rider_ids"), index("rider_starts"))
+        return surface
 
     def save(self, path):
         """Write an .npz file (no pickled objects) that :meth:`load` reads back, with the detail

@@ -1,0 +1,345 @@
+"""Loose parts that ride on the part they touch: an eye sunk into a head, a plate on a chest, a
+bracelet around a forearm, a scan's specks, a sculpt's scales.
+
+A *part* is a connected component of the welded detail mesh that has faces. Part p *touches* a
+part q of at least twice its surface area (RIDE_SHARE) when some vertex of p lies within p's
+*reach* of a vertex of q, widened by q's spacing (q's mean edge length, at most RIDE_CAP D: a
+point on a face lies within about an edge of one of its corners, so a coarse part's wide faces
+count as near):
+
+    reach(p) = max(RIDE_REACH D, min(RIDE_OWN d(p), RIDE_CAP D))
+
+with D the bounding-box diagonal of the whole mesh and d(p) that of the part: 1 % of the mesh
+for specks and small parts, a quarter of the part's own size for a bracelet that hangs loose
+around an arm, never more than 5 % of the mesh (a second figure standing apart stays apart).
+Of the larger parts it touches, a part rides on the largest; a part that touches none is free.
+The artist overrides it per part: a part holding an ``attach`` vertex rides on the nearest
+larger part however far it is (the largest part has none and stays free), a part holding a
+``detach`` vertex is free.
+
+A free part gets its own proxy; a rider gets none: its vertices are carried by the proxy of the
+free part at the end of its chain (its *root*: a button on a belt on a body rides the body's
+proxy), each by the proxy vertex the nearest vertex of the root collapsed into, so the skin
+binds it to the root's proxy faces under it and it follows that surface as the root's own skin
+does (:func:`ride_carriers`).
+
+Cost: vertices are hashed into cubic cells as wide as the largest reach plus spacing; only parts
+sharing or neighbouring a cell are compared, each host's vertices near its candidates in one k-d
+tree: about linear in the vertex count, whatever the number of parts. A mesh of one part costs
+nothing.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import SkinDetachError
+from ..geometry import bbox_diagonal, face_cross
+
+#: A part rides only on parts of at least 1 / RIDE_SHARE times its surface area (two halves of a
+#: cracked scan, or two hands that touch, stay free).
+RIDE_SHARE = 0.5
+#: The least reach, over the whole mesh's bounding-box diagonal.
+RIDE_REACH = 0.01
+#: The reach as a share of the part's own bounding-box diagonal ...
+RIDE_OWN = 0.25
+#: ... capped at this share of the whole mesh's diagonal.
+RIDE_CAP = 0.05
+
+#: Free detail vertices whose mean motion carries a rider's vertex (:class:`RigidRiders`).
+NEAREST = 8
+
+#: The 27 offsets of a cell and its neighbours.
+_NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)], dtype=np.int64)
+
+
+@dataclass
+class Riders:
+    """Which part rides on which.
+
+    labels  (p,) int64  the connected-component label of each part
+    part    (u,) int64  the part of every welded vertex (-1: a vertex no face uses)
+    host    (p,) int64  the part each part rides on directly (-1: free)
+    root    (p,) int64  the free part that carries each part (itself when free)
+    area    (p,) float  each part's surface area
+    forced  (p,) int8   1 where ``attach`` made the part a rider, -1 where ``detach`` freed it, else 0
+    """
+
+    labels: np.ndarray
+    part: np.ndarray
+    host: np.ndarray
+    root: np.ndarray
+    area: np.ndarray
+    forced: np.ndarray
+
+    @property
+    def riding(self):
+        """(p,) bool: the part rides on another."""
+        return self.host >= 0
+
+    def free_faces(self, triangles, components):
+        """(t,) bool: the faces of ``triangles`` whose component (``components`` the labels of their
+        vertices: the detail's, or a clustered copy's) is a free part: they make the proxy."""
+        return ~np.isin(components[triangles[:, 0]], self.labels[self.riding])
+
+    def summary(self):
+        """Figures for the build's stats: parts, riders, the free parts they ride on, and the
+        overrides that decided a part."""
+        riding = self.riding
+        return {"parts": int(self.host.size), "riders": int(riding.sum()),
+                "rider_hosts": int(np.unique(self.root[riding]).size),
+                "riders_attached": int((self.forced == 1).sum()), "parts_detached": int((self.forced == -1).sum())}
+
+
+def find_riders(points, triangles, components, attach=None, detach=None):
+    """The :class:`Riders` of a welded mesh: ``points`` (u, 3), ``triangles`` (t, 3) welded ids,
+    ``components`` (u,) connected-component labels; ``attach`` and ``detach`` (k,) welded vertex ids
+    (or None) of parts the artist made riders or free (a part named in both is free)."""
+    u = points.shape[0]
+    part = np.full(u, -1, dtype=np.int64)
+    face_label = components[triangles[:, 0]]
+    labels, face_part = np.unique(face_label, return_inverse=True)
+    p = labels.size
+    part[triangles.ravel()] = np.repeat(face_part.ravel(), 3)
+    cross = face_cross(points, triangles)
+    area = np.bincount(face_part.ravel(), weights=0.5 * np.sqrt(np.einsum("ij,ij->i", cross, cross)), minlength=p)
+    forced = np.zeros(p, dtype=np.int8)
+    for ids, mark in ((attach, 1), (detach, -1)):
+        if ids is not None and len(ids):
+            ids = np.asarray(ids, dtype=np.int64)
+            if ids.min() < 0 or ids.max() >= u:
+                raise SkinDetachError(f"{'attach' if mark == 1 else 'detach'}: expected welded vertex ids in "
+                                      f"[0, {u}), got {int(ids.min())} to {int(ids.max())}")
+            named = part[ids]
+            forced[named[named >= 0]] = mark
+    host = np.full(p, -1, dtype=np.int64)
+    # rank: 0 for the largest part (more area first, the lower label on a tie).
+    order = np.lexsort((np.arange(p), -area))
+    rank = np.empty(p, dtype=np.int64)
+    rank[order] = np.arange(p)
+    if p > 1:
+        used = np.flatnonzero(part >= 0)
+        whole = bbox_diagonal(points[used])
+        low = points[used].min(axis=0)
+        own = _part_diagonals(points[used], part[used], p)
+        reach = np.maximum(RIDE_REACH * whole, np.minimum(RIDE_OWN * own, RIDE_CAP * whole))
+        spacing = np.minimum(_mean_edges(points, triangles, face_part.ravel(), p), RIDE_CAP * whole)
+        host = _touching(points[used], part[used], spacing, reach, rank, area, low)
+        attached = np.flatnonzero(forced == 1)
+        if attached.size:
+            host[attached] = _nearest_larger(points[used], part[used], attached, rank)
+        host[forced == -1] = -1
+    root = np.arange(p, dtype=np.int64)
+    for index in order:  # larger parts first: a host is always settled before its riders
+        if host[index] >= 0:
+            root[index] = root[host[index]]
+    return Riders(labels=labels, part=part, host=host, root=root, area=area, forced=forced)
+
+
+def ride_carriers(riders, points, carrier, part=None):
+    """``carrier`` (v,) with every rider vertex carried as the nearest vertex of its root part is
+    (that vertex's carrier; vertices of the root without a carrier are skipped): the skin then
+    binds the rider to the root's proxy faces under it. ``points`` (v, 3) positions and ``part``
+    (v,) the part of each vertex: the welded detail's (``riders.part``, the default) or a clustered
+    copy's (the part of each cluster's representative)."""
+    part = riders.part if part is None else part
+    out = carrier.copy()
+    riding = np.flatnonzero((part >= 0) & riders.riding[np.maximum(part, 0)])
+    if not riding.size:
+        return out
+    roots = riders.root[part[riding]]
+    for root in np.unique(roots):
+        mine = riding[roots == root]
+        carried = np.flatnonzero((part == root) & (carrier >= 0))
+        if not carried.size:
+            raise SkinDetachError(f"riders: expected the part they ride on (component {int(riders.labels[root])}) "
+                                  f"to have a proxy, it has none; detach them")
+        nearest = cKDTree(points[carried]).query(points[mine])[1]
+        out[mine] = carrier[carried[nearest]]
+    return out
+
+
+def _mean_edges(points, triangles, face_part, p):
+    """(p,) the mean edge length of each part (every face's three edges; ``face_part`` (t,))."""
+    total = np.zeros(p)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        total += np.bincount(face_part, weights=np.linalg.norm(points[triangles[:, a]] - points[triangles[:, b]],
+                                                                axis=1), minlength=p)
+    return total / np.maximum(3 * np.bincount(face_part, minlength=p), 1)
+
+
+def _part_diagonals(points, part, p):
+    """(p,) the bounding-box diagonal of each part (``part`` (v,) labels of ``points`` (v, 3))."""
+    low = np.full((p, 3), np.inf)
+    high = np.full((p, 3), -np.inf)
+    np.minimum.at(low, part, points)
+    np.maximum.at(high, part, points)
+    return np.linalg.norm(high - low, axis=1)
+
+
+def _cells(points, low, size):
+    """(v,) int64 key of the cubic cell of side ``size`` holding each point, and the grid's extent
+    (3,) (one cell of margin on each side, so every neighbour of a cell has a key)."""
+    cell = np.floor((points - low) / size).astype(np.int64) + 1
+    extent = cell.max(axis=0) + 2
+    return (cell[:, 0] * extent[1] + cell[:, 1]) * extent[2] + cell[:, 2], extent
+
+
+def _touching(points, part, spacing, reach, rank, area, low):
+    """(p,) the largest part each part touches among those of at least 1 / RIDE_SHARE its area (-1:
+    none); ``points`` (v, 3) of the vertices in parts, ``part`` (v,), per part ``spacing``, ``reach``,
+    ``rank`` (0 the largest) and ``area`` (p,), ``low`` (3,) the corner of their box."""
+    p = reach.size
+    host = np.full(p, -1, dtype=np.int64)
+    size = float(reach.max() + spacing.max())
+    if not size > 0.0:
+        return host
+    key, extent = _cells(points, low, size)
+    # Each (cell, part) once, then the parts of every neighbouring cell: the candidate pairs.
+    cell_part = np.unique(key * p + part)
+    keys, owners = cell_part // p, cell_part % p
+    shifts = (_NEIGHBOURS[:, 0] * extent[1] + _NEIGHBOURS[:, 1]) * extent[2] + _NEIGHBOURS[:, 2]
+    pairs = []
+    for shift in shifts:
+        first = np.searchsorted(keys, keys + shift, side="left")
+        count = np.searchsorted(keys, keys + shift, side="right") - first
+        if not count.any():
+            continue
+        rows = np.repeat(np.arange(keys.size), count)
+        skip = np.repeat(first - (np.cumsum(count) - count), count)
+        pairs.append(owners[rows] * p + owners[np.arange(rows.size) + skip])
+    pairs = np.unique(np.concatenate(pairs))
+    rider, larger = pairs // p, pairs % p
+    keep = (rank[larger] < rank[rider]) & (area[rider] <= RIDE_SHARE * area[larger])
+    rider, larger = rider[keep], larger[keep]
+    if not rider.size:
+        return host
+    members = np.argsort(part, kind="stable")
+    bounds = np.searchsorted(part[members], np.arange(p + 1))
+    for big in np.unique(larger):
+        candidates = rider[larger == big]
+        rows = np.concatenate([members[bounds[c]:bounds[c + 1]] for c in candidates])
+        # Only the big part's vertices in or next to the candidates' cells are searched.
+        around = np.unique((np.unique(key[rows])[:, None] + shifts[None, :]).ravel())
+        mine = members[bounds[big]:bounds[big + 1]]
+        mine = mine[np.isin(key[mine], around)]
+        if not mine.size:
+            continue
+        limit = reach[part[rows]] + spacing[big]
+        distance = cKDTree(points[mine]).query(points[rows], distance_upper_bound=float(limit.max()))[0]
+        for touched in np.unique(part[rows][distance <= limit]):
+            if host[touched] < 0 or rank[big] < rank[host[touched]]:
+                host[touched] = big
+    return host
+
+
+def _nearest_larger(points, part, attached, rank):
+    """(a,) the larger part nearest to each of the ``attached`` parts (-1 for the largest part):
+    the least distance between a vertex of the part and one of the larger part."""
+    out = np.full(attached.size, -1, dtype=np.int64)
+    for index, which in enumerate(attached):
+        larger = rank[part] < rank[which]
+        if not larger.any():
+            continue
+        candidates = np.flatnonzero(larger)
+        distance, nearest = cKDTree(points[candidates]).query(points[part == which])
+        out[index] = part[candidates[nearest[np.argmin(distance)]]]
+    return out
+
+
+def rider_groups(riders, part):
+    """(ids (r,) int64, starts (k + 1,) int64): the vertices of each rider, rider after rider (rider
+    j's are ``ids[starts[j]:starts[j + 1]]``), of a mesh whose vertices lie in parts ``part`` (n,)
+    (the detail's: ``riders.part[weld]``; a clustered copy's: the parts of its representatives)."""
+    mine = np.flatnonzero((part >= 0) & riders.riding[np.maximum(part, 0)])
+    order = np.argsort(part[mine], kind="stable")
+    ids = mine[order]
+    _, counts = np.unique(part[ids], return_counts=True)
+    return ids.astype(np.int64), np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+class RigidRiders:
+    """Riders keep their shape: each moves by the rigid motion that best fits how the surface under
+    it moved, as if glued to it (the skin alone would let a thick part over a bending surface
+    stretch as a layer over a bend does: an eye would not stay a sphere).
+
+    ids (r,) int64 detail vertex ids, rider after rider; starts (k + 1,) int64 their bounds; rest
+    (n, 3) the detail's rest positions; ``free`` (n,) bool the vertices of free parts. Under each
+    rider vertex lie the :data:`NEAREST` free vertices nearest it at rest: a rider's *patch* is
+    those of all its vertices (with repeats).
+
+    Minimised, per rider: sum over its patch of |R p + t - p'|^2 with R a rotation (det +1), p the
+    patch at rest and p' as rebuilt: t = mean(p') - R mean(p) and R from the SVD of the 3 x 3
+    covariance (Kabsch), in closed form (no iteration). A rigid motion of the surface moves the
+    rider by exactly that motion."""
+
+    def __init__(self, rest, ids, starts, free):
+        self.ids = np.asarray(ids, dtype=np.int64)
+        self.starts = np.asarray(starts, dtype=np.int64)
+        self.count = np.diff(self.starts)
+        self.points = np.asarray(rest[self.ids], dtype=np.float64)
+        self._rider = np.repeat(np.arange(self.count.size), self.count)
+        self.under, under_rest, self._under_index = _under(rest, self.points, free)
+        if self.under.size:
+            patch = under_rest[self._under_index]  # (r, NEAREST, 3)
+            self._patch_count = self.count * self._under_index.shape[1]
+            self._patch_centre = np.add.reduceat(patch.sum(axis=1), self.starts[:-1], axis=0) / self._patch_count[:, None]
+            self._patch_local = patch - self._patch_centre[self._rider][:, None, :]
+
+    def place(self, out, keep=None):
+        """Move each rider of ``out`` (n, 3) by the rigid motion that best fits its patch (rebuilt in
+        ``out`` already), in place; ``keep`` (k,) bool, optional: riders left as the skin put them
+        (a handle holds some of their vertices)."""
+        if not self.ids.size or not self.under.size:
+            return out
+        moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index]  # (r, NEAREST, 3)
+        centre = np.add.reduceat(moved.sum(axis=1), self.starts[:-1], axis=0) / self._patch_count[:, None]
+        covariance = np.add.reduceat(np.einsum("rki,rkj->rij", self._patch_local, moved), self.starts[:-1], axis=0)
+        u, _, vt = np.linalg.svd(covariance)
+        flip = np.linalg.det(np.einsum("kij,kjl->kil", u, vt)) < 0
+        vt[flip, 2, :] *= -1.0
+        rotation = np.einsum("kji,klj->kil", vt, u)  # R = V U^T (p' = R p + t)
+        placed = np.einsum("ri,rji->rj", self.points - self._patch_centre[self._rider], rotation[self._rider]) \
+            + centre[self._rider]
+        if keep is not None and keep.any():
+            rows = ~keep[self._rider]
+            out[self.ids[rows]] = placed[rows]
+        else:
+            out[self.ids] = placed
+        return out
+
+    def holding(self, held):
+        """(k,) bool: the riders some vertex of which ``held`` (pairs (label, detail ids)) holds."""
+        keep = np.zeros(self.count.size, dtype=bool)
+        if not held or not self.ids.size:
+            return keep
+        ids = np.concatenate([np.asarray(i, dtype=np.int64) for _, i in held])
+        position = np.searchsorted(np.sort(self.ids), ids)
+        order = np.argsort(self.ids, kind="stable")
+        inside = position < self.ids.size
+        hit = np.zeros(ids.size, dtype=bool)
+        hit[inside] = np.sort(self.ids)[position[inside]] == ids[inside]
+        keep[self._rider[order[position[hit]]]] = True
+        return keep
+
+
+def _under(rest, points, free):
+    """(q,) the free detail vertices under some rider vertex, (q, 3) their rest, (r, NEAREST) which
+    of them lie under each of the rider vertices ``points`` (r, 3): the nearest at rest among the
+    ``free`` (n,) bool vertices within the riders' box widened by a tenth of its diagonal (more
+    when none is there)."""
+    candidates = np.flatnonzero(free)
+    if not candidates.size or not points.size:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((points.shape[0], NEAREST), dtype=np.int64)
+    low, high = points.min(axis=0), points.max(axis=0)
+    margin = 0.1 * float(np.linalg.norm(high - low)) + 1e-12
+    while True:
+        near = candidates[((rest[candidates] >= low - margin) & (rest[candidates] <= high + margin)).all(axis=1)]
+        if near.size >= NEAREST or near.size == candidates.size:
+            break
+        margin *= 4.0
+    k = min(NEAREST, near.size)
+    index = cKDTree(np.asarray(rest[near], dtype=np.float64)).query(points, k=k)[1].reshape(points.shape[0], k)
+    used, inverse = np.unique(index, return_inverse=True)
+    return near[used], np.asarray(rest[near[used]], dtype=np.float64), inverse.reshape(index.shape)
