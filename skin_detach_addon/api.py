@@ -33,7 +33,7 @@ from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
-           "remove_handle", "handle_conflicts", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
+           "remove_handle", "handle_conflicts", "set_parts", "part_overrides", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
            "handle_mirror", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
@@ -102,6 +102,25 @@ def finish_build(job):
     if stats["handles_kept"]:
         _prepare_after_change(bpy.data.objects[job.name])
     return stats
+
+
+def set_parts(obj, vertex_ids, mode):
+    """Decide the loose parts of ``obj`` holding ``vertex_ids`` (k,) whatever they touch: "ATTACH"
+    makes each ride on the nearest part of larger area (however far), "DETACH" makes each free (its
+    own proxy: it deforms on its own), "RULE" gives them back to the rule (a part that touches a
+    part of at least twice its area rides on it; docs/addon.md). Stored on the object; the next
+    :func:`build` uses it (a bound mesh: press Rebuild, or call build again). Returns how many
+    parts were named."""
+    obj = _owner(obj)
+    skin_rig.check_mesh_object(obj)
+    stored.check_editable(obj)
+    return skin_rig.set_parts(obj, vertex_ids, mode)
+
+
+def part_overrides(obj):
+    """(attach, detach): the vertex ids (k,) naming ``obj``'s parts made riders or free by
+    :func:`set_parts`, None where there are none."""
+    return skin_rig.part_overrides(_owner(obj))
 
 
 def prepare(obj, preserve_volume=True):

@@ -12,8 +12,8 @@ from mathutils import Matrix
 from ..core.detached_surface import SkinDetachedSurface
 from ..core.detached_surface.held_detail import held_proxy_vertices
 from ..core.errors import SkinDetachError
-from ..core.geometry import bbox_diagonal
-from ..core.validation import MIN_PREVIEW_VERTICES
+from ..core.geometry import bbox_diagonal, component_labels
+from ..core.validation import MIN_PREVIEW_VERTICES, as_vertex_ids
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io, preview_stand_in
 
@@ -154,6 +154,7 @@ class BuildJob:
         self.triangles = mesh_io.read_triangles(mesh, self.positions if self.shown_pose else None)
         self._read = (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(held))
         self.target_faces, self.normal_test = target_faces, normal_test
+        self.attach, self.detach = part_overrides(obj)
         self.preview_vertices = None
         n = self.positions.shape[0]
         # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets none.
@@ -192,7 +193,8 @@ class BuildJob:
         # float32 as read: the core's float64 copy is its own, gone before the diffusion (77 MB at 3.2M).
         self.surface = SkinDetachedSurface.build(self.positions, self.triangles, target_faces=self.target_faces,
                                                  normal_test=self.normal_test,
-                                                 preview_vertices=self.preview_vertices, progress=self._report)
+                                                 preview_vertices=self.preview_vertices, progress=self._report,
+                                                 attach=self.attach, detach=self.detach)
         self.triangles = None  # the surface holds what it needs of them
         self._report(1.0, "writing the binding")
 
@@ -254,6 +256,49 @@ class BuildJob:
             mesh_io.write_positions(obj.data, positions, checked=True)
             preview_stand_in.end_stand_in(obj)
         return _write_build(obj, surface, positions)
+
+
+#: The object's custom property holding the artist's part overrides: {"attach": (k,) int32,
+#: "detach": (k,) int32} vertex ids, each naming the loose part it lies in (see
+#: :mod:`..core.detached_surface.riders`). An object's own property: it goes with the object,
+#: survives Clear Skin and is read by every Build.
+PARTS_KEY = "skin_detach_parts"
+PART_MODES = ("ATTACH", "DETACH", "RULE")
+
+
+def part_overrides(obj):
+    """(attach, detach): the vertex ids (k,) int64 of ``obj``'s parts the artist made riders or free
+    (None where there are none), those past the mesh's vertices dropped (the mesh was edited)."""
+    stored = obj.get(PARTS_KEY)
+    n = len(obj.data.vertices)
+    out = []
+    for key in ("attach", "detach"):
+        ids = None if stored is None or not hasattr(stored, "get") else stored.get(key)
+        ids = np.asarray(ids if ids is not None else [], dtype=np.int64).ravel()
+        ids = ids[(ids >= 0) & (ids < n)]
+        out.append(ids if ids.size else None)
+    return tuple(out)
+
+
+def set_parts(obj, vertex_ids, mode):
+    """Make the loose parts of ``obj`` holding ``vertex_ids`` (k,) riders ("ATTACH"), free ("DETACH")
+    or decided by the rule again ("RULE"); read by the next Build. Returns how many parts that named."""
+    if mode not in PART_MODES:
+        raise SkinDetachError(f"mode: expected one of {', '.join(PART_MODES)}, got {mode!r}")
+    n = len(obj.data.vertices)
+    ids = np.unique(as_vertex_ids("vertex_ids", vertex_ids, n))
+    triangles = mesh_io.read_triangles(obj.data).astype(np.int64)
+    labels = component_labels(triangles, n)
+    named = np.unique(labels[ids])
+    attach, detach = (np.zeros(0, dtype=np.int64) if part is None else part for part in part_overrides(obj))
+    attach = attach[~np.isin(labels[attach], named)]  # the parts named lose what they had
+    detach = detach[~np.isin(labels[detach], named)]
+    if mode == "ATTACH":
+        attach = np.concatenate([attach, ids])
+    elif mode == "DETACH":
+        detach = np.concatenate([detach, ids])
+    obj[PARTS_KEY] = {"attach": attach.astype(np.int32), "detach": detach.astype(np.int32)}
+    return int(named.size)
 
 
 def _write_build(obj, surface, positions):

@@ -44,6 +44,7 @@ class VIEW3D_MT_skin_detach(bpy.types.Menu):
         layout.operator("skin_detach.add_anchor", icon='PINNED')
         layout.menu(VIEW3D_MT_skin_detach_handles.bl_idname, icon='RESTRICT_SELECT_OFF')
         layout.operator("skin_detach.remove_handle", icon='X')
+        layout.operator_menu_enum("skin_detach.set_parts", "mode", text="Loose Parts", icon='MOD_EXPLODE')
         layout.separator()
         layout.operator("skin_detach.drag", icon='VIEW_PAN')
         layout.operator("skin_detach.apply", icon='CHECKMARK')

@@ -3,6 +3,7 @@
 been written by then."""
 
 import bpy
+import numpy as np
 from mathutils import Euler
 
 from .. import api
@@ -80,9 +81,10 @@ def build_report(stats):
     kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
     dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
     preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
+    parts = f"; {parts_text(stats)}" if stats.get("parts", 1) > 1 else ""
     return (f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
             f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
-            f"{stats['case3']:,}){preview}{kept}{dropped}")
+            f"{stats['case3']:,}){parts}{preview}{kept}{dropped}")
 
 
 def build_text(job):
@@ -486,6 +488,55 @@ class SKIN_DETACH_OT_show_stretch(_BoundOperator, bpy.types.Operator):
         return {'FINISHED'}
 
 
+class SKIN_DETACH_OT_set_parts(_Operator, bpy.types.Operator):
+    """Decide the loose parts holding the selected vertices: ride on the part under them (Attach),
+    deform on their own (Detach), or as the rule decides (By Rule); a bound mesh is built again
+    (as Rebuild does: its shape now becomes its rest)"""
+    bl_idname = "skin_detach.set_parts"
+    bl_label = "Set Parts"
+    bl_options = {'REGISTER', 'UNDO'}
+    mode: bpy.props.EnumProperty(
+        name="Parts", default='ATTACH', options={'SKIP_SAVE'},
+        items=[('ATTACH', "Attach", "The selected parts ride on the nearest larger part, however far"),
+               ('DETACH', "Detach", "The selected parts get their own proxy and deform on their own"),
+               ('RULE', "By Rule", "The selected parts ride when they touch a part of at least twice their area")])
+
+    @classmethod
+    def poll(cls, context):
+        obj = api.mesh_of(context.active_object)
+        return obj is not None and obj.type == 'MESH' and obj.name not in BUILDS
+
+    def run(self, context):
+        obj = api.mesh_of(context.active_object)
+        leave_edit_mode(context)
+        selected = np.zeros(len(obj.data.vertices), dtype=bool)
+        obj.data.vertices.foreach_get("select", selected)
+        if not selected.any():
+            raise SkinDetachError(f"selection: expected selected vertices on {obj.name!r}, got none "
+                                  f"(select a vertex of each part in Edit Mode)")
+        named = api.set_parts(obj, np.flatnonzero(selected), self.mode)
+        said = {'ATTACH': "ride on the part under them", 'DETACH': "deform on their own",
+                'RULE': "follow the rule"}[self.mode]
+        if api.is_bound(obj):
+            settings = context.scene.skin_detach
+            target = api.figures(obj)["build"].get("target_faces", settings.target_faces)
+            stats = api.build(obj, target, settings.normal_test, preview_above=settings.preview_above)
+            self.report({'INFO'}, f"Skin Detach: {named} parts {said}; rebuilt: {parts_text(stats)}")
+        else:
+            self.report({'INFO'}, f"Skin Detach: {named} parts {said} (used by Build)")
+        return {'FINISHED'}
+
+
+def parts_text(stats):
+    """What the panel and reports say of a build's loose parts: how many ride on how many."""
+    parts, riders = stats.get("parts", 1), stats.get("riders", 0)
+    if parts <= 1:
+        return "one part"
+    return (f"{parts} parts, {riders} riding on {stats.get('rider_hosts', 0)}"
+            + (f" ({stats['riders_attached']} attached)" if stats.get("riders_attached") else "")
+            + (f" ({stats['parts_detached']} detached)" if stats.get("parts_detached") else ""))
+
+
 CLASSES = (SKIN_DETACH_OT_build, SKIN_DETACH_OT_add_handle, SKIN_DETACH_OT_add_anchor, SKIN_DETACH_OT_remove_handle,
            SKIN_DETACH_OT_select_handle, SKIN_DETACH_OT_apply, SKIN_DETACH_OT_drag, SKIN_DETACH_OT_reset,
-           SKIN_DETACH_OT_clear, SKIN_DETACH_OT_show_stretch)
+           SKIN_DETACH_OT_clear, SKIN_DETACH_OT_show_stretch, SKIN_DETACH_OT_set_parts)

@@ -7,7 +7,7 @@ import bpy
 from .. import api
 from .idle_preparation import FAILED, progress_of
 from .live_update import ERRORS
-from .operators import BUILDS, build_text
+from .operators import BUILDS, build_text, parts_text
 
 
 #: Characters of a label line that fit the sidebar at its default width beside an icon (about
@@ -142,6 +142,11 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         box.label(text="Figures", icon='INFO')
         box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
+        if stats.get("parts", 1) > 1:
+            box.label(text=f"Parts: {parts_text(stats)}")
+            row = box.row(align=True)
+            for mode, text in (('ATTACH', "Attach"), ('DETACH', "Detach"), ('RULE', "By Rule")):
+                row.operator("skin_detach.set_parts", text=text).mode = mode
         if stats.get("target_reached") is False:
             wrapped_label(box, f"Target {stats.get('target_faces', 0):,} faces not reached: the normal test stopped "
                                f"above it", icon='INFO')
