@@ -47,8 +47,13 @@ RIDE_OWN = 0.25
 #: ... capped at this share of the whole mesh's diagonal.
 RIDE_CAP = 0.05
 
-#: Free detail vertices whose mean motion carries a rider's vertex (:class:`RigidRiders`).
+#: Free detail vertices under each rider vertex (:class:`RigidRiders`).
 NEAREST = 8
+#: The size of a rider's pieces, over the whole mesh's diagonal (:class:`RigidRiders`): an eye, a
+#: plate, a bracelet is one piece and moves rigidly; a belt round a waist follows its bend.
+PIECE = 0.1
+#: The most pieces a rider vertex's motion blends.
+BLEND = 8
 
 #: The 27 offsets of a cell and its neighbours.
 _NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)], dtype=np.int64)
@@ -260,48 +265,87 @@ def rider_groups(riders, part):
 
 
 class RigidRiders:
-    """Riders keep their shape: each moves by the rigid motion that best fits how the surface under
-    it moved, as if glued to it (the skin alone would let a thick part over a bending surface
-    stretch as a layer over a bend does: an eye would not stay a sphere).
+    """Riders keep their shape where the surface under them keeps its own: each rider is cut into
+    *pieces* (cubes of :data:`PIECE` times the whole mesh's diagonal; an eye, a plate or a bracelet
+    is one piece), each piece moves by the rigid motion that best fits how the surface under it
+    moved, and each rider vertex by the blend of the motions of its rider's pieces near it. A
+    rider of one piece moves rigidly (an eye stays a sphere); a belt round a bending waist follows
+    the bend piece by piece. (The skin alone would let a thick part over a bending surface stretch
+    as a layer over a bend does.)
 
     ids (r,) int64 detail vertex ids, rider after rider; starts (k + 1,) int64 their bounds; rest
     (n, 3) the detail's rest positions; ``free`` (n,) bool the vertices of free parts. Under each
-    rider vertex lie the :data:`NEAREST` free vertices nearest it at rest: a rider's *patch* is
+    rider vertex lie the :data:`NEAREST` free vertices nearest it at rest: a piece's *patch* is
     those of all its vertices (with repeats).
 
-    Minimised, per rider: sum over its patch of |R p + t - p'|^2 with R a rotation (det +1), p the
+    Minimised, per piece: sum over its patch of |R p + t - p'|^2 with R a rotation (det +1), p the
     patch at rest and p' as rebuilt: t = mean(p') - R mean(p) and R from the SVD of the 3 x 3
-    covariance (Kabsch), in closed form (no iteration). A rigid motion of the surface moves the
-    rider by exactly that motion."""
+    covariance (Kabsch), in closed form (no iteration). A vertex's weights on the pieces of its
+    rider whose centres lie within 2 PIECE D of it (at most :data:`BLEND` of them) are
+    (1 - (d / 2 PIECE D)^2)^2, summing to one: a rigid motion of the surface moves every rider by
+    exactly that motion."""
 
     def __init__(self, rest, ids, starts, free):
         self.ids = np.asarray(ids, dtype=np.int64)
         self.starts = np.asarray(starts, dtype=np.int64)
         self.count = np.diff(self.starts)
+        self.rest = rest
         self.points = np.asarray(rest[self.ids], dtype=np.float64)
         self._rider = np.repeat(np.arange(self.count.size), self.count)
         self.under, under_rest, self._under_index = _under(rest, self.points, free)
-        if self.under.size:
-            patch = under_rest[self._under_index]  # (r, NEAREST, 3)
-            self._patch_count = self.count * self._under_index.shape[1]
-            self._patch_centre = np.add.reduceat(patch.sum(axis=1), self.starts[:-1], axis=0) / self._patch_count[:, None]
-            self._patch_local = patch - self._patch_centre[self._rider][:, None, :]
+        if not self.under.size or not self.ids.size:
+            return
+        size = PIECE * bbox_diagonal(np.asarray(rest, dtype=np.float64)) + 1e-300
+        # Cubes from each rider's own corner, as many along an axis as its extent needs: a rider
+        # smaller than a piece is one piece, whatever its place.
+        low = np.full((self.count.size, 3), np.inf)
+        high = np.full((self.count.size, 3), -np.inf)
+        np.minimum.at(low, self._rider, self.points)
+        np.maximum.at(high, self._rider, self.points)
+        across = np.maximum(np.ceil((high - low) / size), 1.0)
+        step = np.maximum((high - low) / across, 1e-300)
+        cell = np.minimum(np.floor((self.points - low[self._rider]) / step[self._rider]),
+                          across[self._rider] - 1).astype(np.int64)
+        key = np.stack([self._rider, cell[:, 0], cell[:, 1], cell[:, 2]], axis=1)
+        _, piece = np.unique(key, axis=0, return_inverse=True)
+        self._piece = piece.ravel()
+        p = int(self._piece.max()) + 1
+        order = np.argsort(self._piece, kind="stable")
+        self._order, self._bounds = order, np.searchsorted(self._piece[order], np.arange(p + 1))
+        patch = under_rest[self._under_index[order]]  # (r, NEAREST, 3), piece after piece
+        self._patch_count = np.diff(self._bounds) * self._under_index.shape[1]
+        self._patch_centre = np.add.reduceat(patch.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
+        self._patch_local = patch - np.repeat(self._patch_centre, np.diff(self._bounds), axis=0)[:, None, :]
+        # Each vertex's pieces: the nearest of its own rider (the rider's id as a far fourth axis).
+        centres = np.add.reduceat(self.points[order], self._bounds[:-1], axis=0) / np.diff(self._bounds)[:, None]
+        piece_rider = self._rider[order][self._bounds[:-1]]
+        far = 1e3 * (float(np.abs(self.points).max()) + size)
+        k = min(BLEND, p)
+        distance, near = cKDTree(np.column_stack([centres, piece_rider * far])).query(
+            np.column_stack([self.points, self._rider * far]), k=k)
+        distance, near = distance.reshape(-1, k), near.reshape(-1, k)
+        weight = np.clip(1.0 - (distance / (2.0 * size)) ** 2, 0.0, None) ** 2
+        weight[np.arange(near.shape[0]), 0] = np.maximum(weight[:, 0], 1e-12)  # its own piece, at least
+        self._near, self._weight = near, weight / weight.sum(axis=1, keepdims=True)
 
     def place(self, out, keep=None):
-        """Move each rider of ``out`` (n, 3) by the rigid motion that best fits its patch (rebuilt in
-        ``out`` already), in place; ``keep`` (k,) bool, optional: riders left as the skin put them
-        (a handle holds some of their vertices)."""
+        """Move each rider of ``out`` (n, 3) by its pieces' rigid motions fitted to their patches
+        (rebuilt in ``out`` already), in place; ``keep`` (k,) bool, optional: riders left as the
+        skin put them (a handle holds some of their vertices)."""
         if not self.ids.size or not self.under.size:
             return out
-        moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index]  # (r, NEAREST, 3)
-        centre = np.add.reduceat(moved.sum(axis=1), self.starts[:-1], axis=0) / self._patch_count[:, None]
-        covariance = np.add.reduceat(np.einsum("rki,rkj->rij", self._patch_local, moved), self.starts[:-1], axis=0)
+        moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index[self._order]]
+        centre = np.add.reduceat(moved.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
+        covariance = np.add.reduceat(np.einsum("rki,rkj->rij", self._patch_local, moved), self._bounds[:-1], axis=0)
         u, _, vt = np.linalg.svd(covariance)
         flip = np.linalg.det(np.einsum("kij,kjl->kil", u, vt)) < 0
         vt[flip, 2, :] *= -1.0
-        rotation = np.einsum("kji,klj->kil", vt, u)  # R = V U^T (p' = R p + t)
-        placed = np.einsum("ri,rji->rj", self.points - self._patch_centre[self._rider], rotation[self._rider]) \
-            + centre[self._rider]
+        rotation = np.einsum("kji,klj->kil", vt, u)  # R = V U^T (p' = R p + t), one per piece
+        placed = np.zeros_like(self.points)
+        for column in range(self._near.shape[1]):
+            piece = self._near[:, column]
+            local = self.points - self._patch_centre[piece]
+            placed += self._weight[:, column, None] * (np.einsum("ri,rji->rj", local, rotation[piece]) + centre[piece])
         if keep is not None and keep.any():
             rows = ~keep[self._rider]
             out[self.ids[rows]] = placed[rows]

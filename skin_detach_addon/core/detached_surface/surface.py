@@ -142,6 +142,8 @@ class Preview:
                 raise SkinDetachError(f"{source} representatives: expected ({surface.n_detail},) detail ids >= 0, got "
                                       f"{representatives.shape} {representatives.dtype}; rebuild the skin")
             representatives = representatives.astype(np.int64)
+        if surface.riders is not None:  # their rest: the preview's own points
+            surface.set_riders(*surface.riders[:2], points)
         return cls(points, triangles, surface, representatives)
 
 
@@ -754,7 +756,16 @@ class SkinDetachedSurface:
         """Write an .npz file (no pickled objects) that :meth:`load` reads back, with the detail
         triangles when they were given."""
         extra = {} if self.triangles is None else {"detail_triangles": self.triangles}
+        if self.riders is not None:  # the riders' rest is the detail's: kept, not rebuilt on load
+            rest = self._rider_rest()
+            if rest is not None:
+                extra["detail_rest"] = rest
         np.savez(path, **self.to_arrays(), **extra)
+
+    def _rider_rest(self):
+        """(n, 3) the detail's rest the riders were set with, or None (not given)."""
+        riders = self.riders
+        return riders.rest if isinstance(riders, RigidRiders) else riders[2]
 
     @classmethod
     def load(cls, path):
@@ -765,6 +776,10 @@ class SkinDetachedSurface:
         except (OSError, ValueError, EOFError) as exc:
             raise SkinDetachError(f"path: expected a skin-detach .npz file, could not read {path!s}: {exc}") from None
         surface = cls.from_arrays(arrays, source=f"path {path!s}")
+        if surface.riders is not None and "detail_rest" in arrays:
+            surface.set_riders(*surface.riders[:2], as_points(f"path {path!s} detail_rest",
+                                                               np.asarray(arrays["detail_rest"], dtype=np.float64)
+                                                               .reshape(-1, 3), surface.n_detail))
         if "detail_triangles" in arrays:
             try:
                 surface.attach_topology(np.asarray(arrays["detail_triangles"]).astype(np.int64).reshape(-1, 3))
