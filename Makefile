@@ -52,6 +52,7 @@ bench: $(VENV)/.installed
 	$(PY) scripts/benchmark_quality.py --poses 100 --json bench/results/quality.json
 	$(PY) scripts/benchmark_quality.py --rigs --json bench/results/rigs.json
 	$(PY) scripts/benchmark_quality.py --proxy-angles --json bench/results/proxy_angles.json
+	$(PY) scripts/benchmark_riders.py --json bench/results/riders.json
 	$(PY) scripts/benchmark_page.py
 
 extension: $(VENV)/.installed

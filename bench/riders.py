@@ -13,7 +13,8 @@ the body's box: it must not move).
 Figures (:func:`follow_figures`): where the surface under a part carried it is the part's rest
 moved, vertex by vertex, by the mean motion of the ``NEAREST`` body vertices nearest it at rest;
 ``offset`` is the mean distance of the part's vertices from there over the body's diagonal
-(``offset_max`` the largest); ``stretch`` the part's own edge distortion (mean | |e'| / |e| - 1 |
+(``offset_max`` the largest), ``displaced`` the largest distance of a part's vertex from its rest
+(a part that rides on nothing must stay: 0); ``stretch`` the part's own edge distortion (mean | |e'| / |e| - 1 |
 over its edges) and ``surface_stretch`` the same over the body's edges at those nearest vertices.
 """
 
@@ -22,6 +23,12 @@ from scipy.spatial import cKDTree
 
 from bench.rigs import limb
 
+#: The parts :func:`body_parts` places, in the benchmark's order.
+KINDS = ("eye", "plate", "bracelet", "far")
+#: The header of the benchmark's table (:func:`table_lines`).
+TABLE_HEAD = ("| mesh | set-up | part | bend: off where carried, mean / max (diag) | drag: the same | "
+              "own stretch / surface's under it | handle / anchor error (diag) | build s / move ms / confirm ms |\n"
+              "|---|---|---|---|---|---|---|---|")
 #: Body vertices whose mean motion carries a part's vertex.
 NEAREST = 8
 
@@ -169,7 +176,30 @@ def follow_figures(rest, deformed, triangles, ranges, body="body"):
         under = np.unique(near)
         surface = edges[np.isin(edges[:, 0], under) & np.isin(edges[:, 1], body_ids)]
         out[kind] = dict(offset=float(offset.mean()), offset_max=float(offset.max()),
+                         displaced=float(np.linalg.norm(deformed[ids] - rest[ids], axis=1).max() / diag),
                          moved=float(np.linalg.norm(carried - rest[ids], axis=1).mean() / diag),
                          stretch=_edge_stretch(rest, deformed, mine),
                          surface_stretch=_edge_stretch(rest, deformed, surface))
+    return out
+
+
+def table_lines(row):
+    """Markdown lines of a row of scripts/benchmark_riders.py: one per part (:data:`TABLE_HEAD`)."""
+    if row.get("unbound"):
+        return [f"| {row['mesh']} | {row['setup']} | - | Surface Deform did not bind | | | | |"]
+    out = []
+    for kind in KINDS:
+        bend = row["bend"][kind]
+        drag = row["drag"][kind] if "drag" in row else None
+        if kind == "far":  # rides on nothing: how far it moved from its rest
+            bent, dragged = f"stays: moved {bend['displaced']:.1e}", \
+                f"stays: moved {drag['displaced']:.1e}" if drag else "-"
+        else:
+            bent = f"{bend['offset']:.2e} / {bend['offset_max']:.2e}"
+            dragged = f"{drag['offset']:.2e} / {drag['offset_max']:.2e}" if drag else "-"
+        timing = (f"{row['build_s']:.2f} / {row['move_ms_median']:.1f} / {row['confirm_ms']:.0f}" if "build_s" in row
+                  else f"{row['set_up_s']:.2f} / {row['step_ms']:.1f} / -")
+        out.append(f"| {row['mesh']} | {row['setup']} | {kind} | {bent} | "
+                   f"{dragged} | {bend['stretch']:.4f} / {bend['surface_stretch']:.4f} | "
+                   f"{row['handle_error']:.1e} / {row['anchor_error']:.1e} | {timing} |")
     return out

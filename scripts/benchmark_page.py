@@ -4,7 +4,8 @@
 
 Reads ``drag.json`` (scripts/benchmark_drag.py --json), ``quality.json``
 (scripts/benchmark_quality.py --json), ``rigs.json`` (scripts/benchmark_quality.py --rigs --json),
-``proxy_angles.json`` (scripts/benchmark_quality.py --proxy-angles --json) and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is
+``proxy_angles.json`` (scripts/benchmark_quality.py --proxy-angles --json), ``riders.json``
+(scripts/benchmark_riders.py --json) and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is
 there), each with the command, date, machine and versions it was measured with (bench/report.py), and writes a section per benchmark, one table per measurement under that
 heading. ``make bench`` measures drag, quality, rigs and proxy angles and runs this; the scale benchmark is run by
 hand (long, and its large rows need a larger machine).
@@ -21,6 +22,7 @@ sys.path.insert(0, str(ROOT))  # the repository root: bench
 from bench.report import table  # noqa: E402
 from bench.scale_tables import tables  # noqa: E402
 from bench.rigs import failed_goals  # noqa: E402
+from bench.riders import TABLE_HEAD, table_lines  # noqa: E402
 
 
 def heading(meta):
@@ -175,6 +177,19 @@ def proxy_angles_section(data):
             + heading(data["meta"]) + "\n" + table(columns, rows))
 
 
+def riders_section(data):
+    rows = data["rows"]["riders"]
+    return ("## Riders and several objects\n\nLoose parts placed on each body (an eye half sunk at the top, a plate "
+            "lying on the middle, a bracelet round the limb's forearm, a prop standing apart), the body rigged as the "
+            "bend scenario (parts not selected), posed by the bend (api.deform) and by a drag (the handle moved by the "
+            "bend's shift). A part's offset: how far it ends from where the surface under it carried it (its vertices "
+            "moved by the mean motion of the 8 nearest body vertices) over the diagonal; goals: within 1 % (mean), "
+            "its own stretch no more than the surface's under it, the prop unmoved. Blender's stack: the body "
+            "decimated to the same faces with Hook + Laplacian Deform, Surface Deform on the body and on each part, "
+            "same run.\n\n" + heading(data["meta"]) + "\n" + TABLE_HEAD + "\n"
+            + "\n".join(line for row in rows for line in table_lines(row)) + "\n")
+
+
 def scale_section(data):
     return ("## Scale: Table 1, Blender's stack side by side, the modal drag at millions\n\n" + heading(data["meta"]) +
             tables(data["rows"]))
@@ -186,7 +201,8 @@ def page(results):
              "benchmark, `python scripts/benchmark_scale.py`, is long and run by hand with `--json` into the same "
              "folder); do not edit it by hand.\n"]
     for name, render in (("drag.json", drag_section), ("quality.json", quality_section), ("rigs.json", rigs_section),
-                         ("proxy_angles.json", proxy_angles_section), ("scale.json", scale_section)):
+                         ("proxy_angles.json", proxy_angles_section), ("riders.json", riders_section),
+                         ("scale.json", scale_section)):
         path = results / name
         if path.exists():
             parts.append(render(json.loads(path.read_text(encoding="utf-8"))))

@@ -176,3 +176,24 @@ def test_quality_benchmark_proxy_angles_option_measures_the_proxy_beside_decimat
         assert row["goals_met"] == (row["under_1"] == 0 and row["under_10_pct"] <= 1.0)
         assert row["decimate"]["faces"] > 0 and math.isfinite(row["decimate"]["least"])
     assert rows[-1]["vertices"] == 299930
+
+
+def test_riders_benchmark_measures_each_part_beside_blenders_stack(tmp_path):
+    script = BENCHMARK.parent / "benchmark_riders.py"
+    run = subprocess.run([sys.executable, str(script), "--meshes", "cow", "--at-least", "3000", "--faces", "300",
+                          "--moves", "5", "--json", str(tmp_path / "r.json")], capture_output=True, text=True,
+                         timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "## Riders and several objects" in run.stdout
+    rows = json.loads((tmp_path / "r.json").read_text())["rows"]["riders"]
+    setups = [row["setup"] for row in rows]
+    assert setups[0] == "one mesh" and setups[-1] == "Blender stack"
+    ours = rows[0]
+    assert (ours["parts"], ours["riders"]) == (5, 3)  # the body, three riders and the prop apart
+    for kind in ("eye", "plate", "bracelet", "far"):
+        for pose in ("bend", "drag"):
+            assert all(math.isfinite(value) for value in ours[pose][kind].values())
+    assert ours["bend"]["far"]["displaced"] <= 1e-6 and ours["drag"]["far"]["displaced"] <= 1e-6
+    assert ours["bend"]["eye"]["offset"] < 0.5 * ours["bend"]["eye"]["moved"]  # it followed the head
+    assert ours["handle_error"] <= 1e-5 and ours["anchor_error"] <= 1e-5
+    assert run.stdout.count("| cow |") == 4 * len(rows)
