@@ -31,7 +31,7 @@ def character():
         "plate": uv_sphere((1.035, 0.5, 2.0), 0.12, squash=(0.25, 1.0, 1.0)),
         "bracelet": torus((0.5, 0.5, 1.0), (0.0, 0.0, 1.0), 0.5 * np.sqrt(2.0) + 0.03, 0.01),
         "button": uv_sphere((0.5 + 0.5 * np.sqrt(2.0) + 0.05, 0.5, 1.0), 0.015),
-        "prop": cube((2.0, 0.5, 0.5), 0.2),
+        "prop": box(size=(0.2, 0.2, 0.2), cells=(3, 3, 3), offset=(1.9, 0.4, 0.4)),
     }
     assert 0.5 > RIDE_CAP * np.linalg.norm([2.1, 1.0, 3.0])  # the prop is out of every reach
     ids, offset = {}, 0
@@ -65,7 +65,8 @@ def test_parts_that_touch_a_larger_part_ride_on_it_and_a_part_far_from_all_is_fr
     assert found.host[button] == bracelet and found.root[button] == body  # a chain ends on the body
     prop = part_of(found, mesh, ids["prop"])
     assert found.host[prop] == -1 and found.root[prop] == prop
-    assert found.summary() == {"parts": 6, "riders": 4, "rider_hosts": 1, "riders_attached": 0, "parts_detached": 0}
+    assert found.summary() == {"parts": 6, "riders": 4, "parts_still": 0, "rider_hosts": 1, "riders_attached": 0,
+                               "parts_detached": 0}
 
 
 def test_two_parts_of_about_the_same_size_that_touch_stay_free():
@@ -232,3 +233,37 @@ def test_riders_survive_the_compact_store_and_the_npz_file(tmp_path):
     surface.save(tmp_path / "rig.npz")
     loaded = SkinDetachedSurface.load(tmp_path / "rig.npz")
     assert np.abs(loaded.reconstruct(bent) - expected).max() <= 1e-12
+
+
+def test_specks_too_small_for_a_share_of_the_proxy_keep_their_rest_and_take_no_proxy_faces():
+    """A scan's floating specks (500 tiny boxes far from the body and from each other): each would
+    take MIN_COMPONENT_FACES proxy faces (4,000 for a 1,000 target); they get none and stay where
+    they are whatever the proxy does, unless a handle holds them."""
+    from skin_detach_addon.core.detached_surface.simplification import MIN_COMPONENT_FACES
+    body = uv_sphere((0.0, 0.0, 0.0), 1.0, segments=64, rings=32)
+    rng = np.random.default_rng(2)
+    spots = rng.uniform(-6.0, 6.0, size=(800, 3))
+    spots = spots[np.linalg.norm(spots, axis=1) > 2.0][:500]
+    points, triangles = merge(body, *[cube(x, 0.01) for x in spots])
+    specks = np.arange(body[0].shape[0], points.shape[0])
+    surface = SkinDetachedSurface.build(points, triangles, target_faces=1000)
+    assert 500 * MIN_COMPONENT_FACES > 1000 and surface.stats["parts_still"] == 500
+    assert surface.proxy_faces.shape[0] <= 1000
+    surface.attach_topology(triangles)
+    rotation = random_rotation(4)
+    moved = surface.reconstruct(surface.proxy_vertices @ rotation.T + 1.0)
+    assert np.array_equal(moved[specks], points[specks])
+    body_ids = np.arange(body[0].shape[0])
+    assert np.abs(moved[body_ids] - (points[body_ids] @ rotation.T + 1.0)).max() <= 1e-9 * 12.0
+    # A handle holding one speck: its vertices where the handle puts them, the others still.
+    from skin_detach_addon.core.detached_surface.held_detail import HeldPlacement
+    held = specks[:8]
+    groups = np.full(surface.proxy_vertices.shape[0], -1, dtype=np.int64)
+    groups[surface.proxy_vertices_for(held)] = 1
+    motion = np.eye(4)
+    motion[:3, 3] = [0.5, 0.0, 0.0]
+    placement = HeldPlacement(points, [(1, held)])
+    out = surface.reconstruct(surface.proxy_vertices, groups=groups, held=[(1, held)],
+                              place=lambda result: placement(result, [motion]))
+    assert np.abs(out[held] - (points[held] + [0.5, 0.0, 0.0])).max() <= 1e-12
+    assert np.array_equal(out[specks[8:]], points[specks[8:]])

@@ -105,7 +105,8 @@ def surface_from_compact(arrays, points, triangles, source="arrays", progress=No
         except (KeyError, TypeError, ValueError) as exc:
             raise SkinDetachError(f"{source}: expected rider_ids and rider_starts, got malformed data "
                                   f"({type(exc).__name__}: {exc}); rebuild the skin") from None
-        surface.set_riders(ids, starts, points)
+        still = np.asarray(arrays["still_ids"]).astype(np.int64).ravel() if "still_ids" in arrays else None
+        surface.set_riders(ids, starts, points, still=still)
     report(STAGES[1][1], "done")
     return surface
 

@@ -36,6 +36,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import SkinDetachError
 from ..geometry import bbox_diagonal, face_cross
+from .simplification import MIN_COMPONENT_FACES
 
 #: A part rides only on parts of at least 1 / RIDE_SHARE times its surface area (two halves of a
 #: cracked scan, or two hands that touch, stay free).
@@ -69,6 +70,8 @@ class Riders:
     root    (p,) int64  the free part that carries each part (itself when free)
     area    (p,) float  each part's surface area
     forced  (p,) int8   1 where ``attach`` made the part a rider, -1 where ``detach`` freed it, else 0
+    still   (p,) bool   free parts too small for a share of the proxy (:meth:`settle_still`), and
+                        the riders whose root is one: they keep their rest unless a handle holds them
     """
 
     labels: np.ndarray
@@ -77,6 +80,22 @@ class Riders:
     root: np.ndarray
     area: np.ndarray
     forced: np.ndarray
+    still: np.ndarray = None
+
+    def settle_still(self, face_part, target):
+        """Mark the free parts whose share of ``target`` proxy faces (by their face count among the
+        free parts' faces; ``face_part`` (t,) the part of every face) is under
+        :data:`.simplification.MIN_COMPONENT_FACES` as still (a scan's floating specks: each would
+        take that many proxy faces, a proxy of thousands of components), and the riders whose root
+        is one. The largest free part never is."""
+        p = self.host.size
+        counts = np.bincount(face_part, minlength=p)
+        free = ~self.riding
+        share = target * counts / max(int(counts[free].sum()), 1)
+        still = free & (share < MIN_COMPONENT_FACES)
+        largest = np.flatnonzero(free)[np.argmax(self.area[free])]
+        still[largest] = False
+        self.still = still[self.root]
 
     @property
     def riding(self):
@@ -85,14 +104,17 @@ class Riders:
 
     def free_faces(self, triangles, components):
         """(t,) bool: the faces of ``triangles`` whose component (``components`` the labels of their
-        vertices: the detail's, or a clustered copy's) is a free part: they make the proxy."""
-        return ~np.isin(components[triangles[:, 0]], self.labels[self.riding])
+        vertices: the detail's, or a clustered copy's) is a free part that is not still: they make
+        the proxy."""
+        out = ~self.riding if self.still is None else ~self.riding & ~self.still
+        return np.isin(components[triangles[:, 0]], self.labels[out])
 
     def summary(self):
         """Figures for the build's stats: parts, riders, the free parts they ride on, and the
         overrides that decided a part."""
         riding = self.riding
         return {"parts": int(self.host.size), "riders": int(riding.sum()),
+                "parts_still": 0 if self.still is None else int(self.still.sum()),
                 "rider_hosts": int(np.unique(self.root[riding]).size),
                 "riders_attached": int((self.forced == 1).sum()), "parts_detached": int((self.forced == -1).sum())}
 
@@ -150,7 +172,8 @@ def ride_carriers(riders, points, carrier, part=None):
     copy's (the part of each cluster's representative)."""
     part = riders.part if part is None else part
     out = carrier.copy()
-    riding = np.flatnonzero((part >= 0) & riders.riding[np.maximum(part, 0)])
+    moving = riders.riding if riders.still is None else riders.riding & ~riders.still
+    riding = np.flatnonzero((part >= 0) & moving[np.maximum(part, 0)])
     if not riding.size:
         return out
     roots = riders.root[part[riding]]
@@ -257,11 +280,20 @@ def rider_groups(riders, part):
     """(ids (r,) int64, starts (k + 1,) int64): the vertices of each rider, rider after rider (rider
     j's are ``ids[starts[j]:starts[j + 1]]``), of a mesh whose vertices lie in parts ``part`` (n,)
     (the detail's: ``riders.part[weld]``; a clustered copy's: the parts of its representatives)."""
-    mine = np.flatnonzero((part >= 0) & riders.riding[np.maximum(part, 0)])
+    moving = riders.riding if riders.still is None else riders.riding & ~riders.still
+    mine = np.flatnonzero((part >= 0) & moving[np.maximum(part, 0)])
     order = np.argsort(part[mine], kind="stable")
     ids = mine[order]
     _, counts = np.unique(part[ids], return_counts=True)
     return ids.astype(np.int64), np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def still_vertices(riders, part):
+    """(s,) int64 the vertices of still parts (:meth:`Riders.settle_still`) of a mesh whose vertices
+    lie in parts ``part`` (n,)."""
+    if riders.still is None:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero((part >= 0) & riders.still[np.maximum(part, 0)]).astype(np.int64)
 
 
 class RigidRiders:
@@ -285,7 +317,9 @@ class RigidRiders:
     (1 - (d / 2 PIECE D)^2)^2, summing to one: a rigid motion of the surface moves every rider by
     exactly that motion."""
 
-    def __init__(self, rest, ids, starts, free):
+    def __init__(self, rest, ids, starts, free, still=None):
+        self.still = np.zeros(0, dtype=np.int64) if still is None else np.asarray(still, dtype=np.int64)
+        self._still_rest = np.asarray(rest[self.still], dtype=np.float64)
         self.ids = np.asarray(ids, dtype=np.int64)
         self.starts = np.asarray(starts, dtype=np.int64)
         self.count = np.diff(self.starts)
@@ -330,8 +364,13 @@ class RigidRiders:
 
     def place(self, out, keep=None):
         """Move each rider of ``out`` (n, 3) by its pieces' rigid motions fitted to their patches
-        (rebuilt in ``out`` already), in place; ``keep`` (k,) bool, optional: riders left as the
-        skin put them (a handle holds some of their vertices)."""
+        (rebuilt in ``out`` already), and put the still vertices back at rest, in place; ``keep``
+        (:meth:`holding`), optional: the riders left as the skin put them and the still vertices
+        left where their handle put them (a handle holds some of their vertices)."""
+        riders_held, still_held = (None, None) if keep is None else keep
+        if self.still.size:
+            rows = slice(None) if still_held is None else ~still_held
+            out[self.still[rows]] = self._still_rest[rows]
         if not self.ids.size or not self.under.size:
             return out
         moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index[self._order]]
@@ -346,26 +385,22 @@ class RigidRiders:
             piece = self._near[:, column]
             local = self.points - self._patch_centre[piece]
             placed += self._weight[:, column, None] * (np.einsum("ri,rji->rj", local, rotation[piece]) + centre[piece])
-        if keep is not None and keep.any():
-            rows = ~keep[self._rider]
+        if riders_held is not None and riders_held.any():
+            rows = ~riders_held[self._rider]
             out[self.ids[rows]] = placed[rows]
         else:
             out[self.ids] = placed
         return out
 
     def holding(self, held):
-        """(k,) bool: the riders some vertex of which ``held`` (pairs (label, detail ids)) holds."""
-        keep = np.zeros(self.count.size, dtype=bool)
-        if not held or not self.ids.size:
-            return keep
-        ids = np.concatenate([np.asarray(i, dtype=np.int64) for _, i in held])
-        position = np.searchsorted(np.sort(self.ids), ids)
-        order = np.argsort(self.ids, kind="stable")
-        inside = position < self.ids.size
-        hit = np.zeros(ids.size, dtype=bool)
-        hit[inside] = np.sort(self.ids)[position[inside]] == ids[inside]
-        keep[self._rider[order[position[hit]]]] = True
-        return keep
+        """(riders (k,) bool, still (s,) bool): the riders some vertex of which ``held`` (pairs
+        (label, detail ids)) holds, and the still vertices it holds (for :meth:`place`'s ``keep``)."""
+        riders, still = np.zeros(self.count.size, dtype=bool), np.zeros(self.still.size, dtype=bool)
+        if held:
+            ids = np.unique(np.concatenate([np.asarray(i, dtype=np.int64) for _, i in held]))
+            riders[np.unique(self._rider[np.isin(self.ids, ids)])] = True
+            still = np.isin(self.still, ids)
+        return riders, still
 
 
 def _under(rest, points, free):

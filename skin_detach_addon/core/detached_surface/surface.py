@@ -25,7 +25,7 @@ from .held_detail import layout_of, owned_pairs
 from .checked_collapse import cluster_quadrics, collapse_with_normal_test
 from .prepared_mesh import prepare_mesh
 from .reconstruction import LayoutRebuild, Rebuild, rebuild_matrix
-from .riders import RigidRiders, find_riders, ride_carriers, rider_groups
+from .riders import RigidRiders, find_riders, ride_carriers, rider_groups, still_vertices
 from .seam_weights import SEAM_STEPS, SeamWeights
 from .simplification import follow_nearest, simplify
 from .sliver_repair import face_angles, is_sliver, repair_slivers
@@ -143,7 +143,7 @@ class Preview:
                                       f"{representatives.shape} {representatives.dtype}; rebuild the skin")
             representatives = representatives.astype(np.int64)
         if surface.riders is not None:  # their rest: the preview's own points
-            surface.set_riders(*surface.riders[:2], points)
+            surface.set_riders(*surface.riders[:2], points, still=surface.riders[3])
         return cls(points, triangles, surface, representatives)
 
 
@@ -422,6 +422,7 @@ class SkinDetachedSurface:
         n_components = int(np.count_nonzero(np.bincount(mesh.components[mesh.triangles[:, 0]])))
         riders = find_riders(mesh.points, mesh.triangles, mesh.components,
                              *(None if ids is None else mesh.weld[ids] for ids in (attach, detach)))
+        riders.settle_still(riders.part[mesh.triangles[:, 0]], target)
         del points, faces  # the prepared mesh holds what is still needed (often the same arrays)
         prepared = time.perf_counter()
         clustered = None
@@ -483,9 +484,10 @@ class SkinDetachedSurface:
                               cls(proxy_points, proxy_faces, np.arange(c), preview_carrier, preview_skin,
                                   topology_fingerprint(c, clustered.triangles), {"preview_of": n_detail}),
                               clustered.representatives)
-            if riders.riding.any():
-                preview.surface.set_riders(*rider_groups(riders, riders.part[clustered.representatives]),
-                                           clustered.points)
+            if riders.riding.any() or riders.still.any():
+                part = riders.part[clustered.representatives]
+                preview.surface.set_riders(*rider_groups(riders, part), clustered.points,
+                                           still=still_vertices(riders, part))
         bound = time.perf_counter()
         with_normal = max(int(rows_any(mesh.normals).sum()), 1)
         bound_share = bound_disagreement(skin, mesh.normals, proxy_points, proxy_faces).sum() / with_normal
@@ -520,8 +522,9 @@ class SkinDetachedSurface:
         }
         report(0.9, "preparing the rebuild")
         surface = cls(proxy_points, proxy_faces, mesh.weld, carrier, skin, fingerprint, stats)
-        if riders.riding.any():
-            surface.set_riders(*rider_groups(riders, riders.part[mesh.weld]), mesh.points[mesh.weld])
+        if riders.riding.any() or riders.still.any():
+            surface.set_riders(*rider_groups(riders, riders.part[mesh.weld]), mesh.points[mesh.weld],
+                               still=still_vertices(riders, riders.part[mesh.weld]))
         edges = mesh.graph
         if mesh.degenerate.size:
             edges = edges + half_edge_graph(mesh.degenerate, mesh.points.shape[0])
@@ -570,27 +573,35 @@ class SkinDetachedSurface:
             self._rigid_riders().place(result, keep=self._riders_held(held))
         return result
 
-    def set_riders(self, ids, starts, rest=None):
+    def set_riders(self, ids, starts, rest=None, still=None):
         """Make the riders keep their shape (:class:`.riders.RigidRiders`): ``ids`` (r,) detail
         vertex ids rider after rider, ``starts`` (k + 1,) their bounds, ``rest`` (n, 3) the detail's
-        rest positions (None: the rebuild of the rest proxy, made on first use)."""
-        ids = as_vertex_ids("rider_ids", ids, self.n_detail)
+        rest positions (None: the rebuild of the rest proxy, made on first use); ``still`` (s,)
+        detail vertex ids of the parts that keep their rest (too small for a share of the proxy:
+        :meth:`.riders.Riders.settle_still`), unless a handle holds them."""
+        ids = np.asarray(ids, dtype=np.int64).ravel()
+        if ids.size:
+            ids = as_vertex_ids("rider_ids", ids, self.n_detail)
         starts = np.asarray(starts, dtype=np.int64).ravel()
         if starts.size < 1 or starts[0] != 0 or starts[-1] != ids.size or (np.diff(starts) <= 0).any():
             raise SkinDetachError(f"rider_starts: expected increasing bounds from 0 to {ids.size}, got "
                                   f"{starts[:4].tolist()}...{starts[-2:].tolist()}")
-        self.riders = (ids, starts, rest)
+        still = np.zeros(0, dtype=np.int64) if still is None else np.asarray(still, dtype=np.int64).ravel()
+        if still.size:
+            still = as_vertex_ids("still_ids", still, self.n_detail)
+        self.riders = (ids, starts, rest, still)
         self._riders_by_held = (None, None)
 
     def _rigid_riders(self):
         if not isinstance(self.riders, RigidRiders):
-            ids, starts, rest = self.riders
+            ids, starts, rest, still = self.riders
             if rest is None:
                 self.riders = None  # the rest as the skin rebuilds it, riders not yet placed
                 rest = self.reconstruct(self.proxy_vertices)
             free = np.ones(self.n_detail, dtype=bool)
             free[ids] = False
-            self.riders = RigidRiders(rest, ids, starts, free)
+            free[still] = False
+            self.riders = RigidRiders(rest, ids, starts, free, still)
         return self.riders
 
     def _riders_held(self, held):
@@ -692,8 +703,9 @@ class SkinDetachedSurface:
         if self.riders is None:
             return {}
         riders = self.riders
-        ids, starts = (riders.ids, riders.starts) if isinstance(riders, RigidRiders) else riders[:2]
-        return {"rider_ids": ids, "rider_starts": starts}
+        ids, starts, still = (riders.ids, riders.starts, riders.still) if isinstance(riders, RigidRiders) \
+            else (riders[0], riders[1], riders[3])
+        return {"rider_ids": ids, "rider_starts": starts, "still_ids": still}
 
     @classmethod
     def from_arrays(cls, arrays, source="arrays"):
@@ -749,7 +761,8 @@ class SkinDetachedSurface:
             raise SkinDetachError(f"{source}: expected the build figures as a JSON object, got {type(stats).__name__}")
         surface = cls(proxy_vertices, proxy_faces, weld, index("carrier"), skin, str(arrays["fingerprint"]), stats)
         if "rider_ids" in arrays:
-            surface.set_riders(index("rider_ids"), index("rider_starts"))
+            surface.set_riders(index("rider_ids"), index("rider_starts"),
+                               still=index("still_ids") if "still_ids" in arrays else None)
         return surface
 
     def save(self, path):
@@ -779,7 +792,8 @@ class SkinDetachedSurface:
         if surface.riders is not None and "detail_rest" in arrays:
             surface.set_riders(*surface.riders[:2], as_points(f"path {path!s} detail_rest",
                                                                np.asarray(arrays["detail_rest"], dtype=np.float64)
-                                                               .reshape(-1, 3), surface.n_detail))
+                                                               .reshape(-1, 3), surface.n_detail),
+                               still=surface.riders[3])
         if "detail_triangles" in arrays:
             try:
                 surface.attach_topology(np.asarray(arrays["detail_triangles"]).astype(np.int64).reshape(-1, 3))
