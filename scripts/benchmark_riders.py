@@ -1,7 +1,7 @@
 """Riders and several objects: loose parts on a body follow it (issue 51), beside Blender's stack.
 
     python scripts/benchmark_riders.py [--meshes armadillo,cow,homer,spot] [--faces 1000] [--moves 20]
-                                       [--at-least 25000] [--json PATH]
+                                       [--at-least 25000] [--several 300K] [--json PATH]
 
 Per mesh (flat-subdivided to at least 25,000 vertices), the parts of bench/riders.py are placed on
 the body: an eye half sunk at the top, a plate lying on the middle, a bracelet round the limb's
@@ -12,6 +12,11 @@ objects. Each is rigged as the bend scenario (bench/scenario.py) rigs the body: 
 bend (the handle's empty moved to the full pose, api.deform) and a drag (api.DragSession, as the
 modal operator runs it: the mouse moves the handle by the bend's shift in ``--moves`` steps, then
 Enter).
+
+``--several``: a character of the armadillo at that size with two eyes, a plate and a bracelet
+as separate objects, built as one rig and as the same meshes joined (the build's time against the
+joined mesh's, goal 1.2x at most), a drag's moves (goal: 16 ms median) and how far the objects
+end from the joined mesh's pose.
 
 Figures per part and pose (bench/riders.py's follow_figures): how far the part ends from where
 the surface under it carried it (its vertices moved by the mean motion of the 8 nearest body
@@ -75,8 +80,8 @@ def ours(name, points, triangles, ranges, scenario, faces, moves, separate):
             for obj, ids in zip(objects, ranges.values()):
                 out[ids] = mesh_io.read_positions(obj.data)
             return out
-        offsets = dict(zip(ranges, np.cumsum([0] + [ids.size for ids in ranges.values()])[:-1]))
-        anchor_ids, handle_ids = scenario.anchor_ids + offsets["body"], scenario.handle_ids + offsets["body"]
+        first = api.member_ranges(owner)[owner][0]  # the body's combined ids (the owner comes first)
+        anchor_ids, handle_ids = scenario.anchor_ids + first, scenario.handle_ids + first
     else:
         owner = blender_mesh(name, points, triangles)
         start = time.perf_counter()
@@ -200,12 +205,86 @@ def rows_for(name, faces, moves, at_least=25_000):
     return rows
 
 
+def several_objects(size, faces, moves):
+    """A character of the armadillo at ``size`` (bench.meshes.SIZES) and four accessories as separate
+    objects (two eyes, a plate, a bracelet: bench/riders.py's, the second eye mirrored across the
+    middle axis), built as one rig and as the same meshes joined; the bend's anchor and handle; a
+    drag of ``moves`` mouse moves. Dict: vertices, build seconds of each and their ratio, the
+    drag's move median and p95 ms and its confirm ms (the rig of several objects), and the largest
+    difference between the objects' bent positions and the joined mesh's (over the diagonal)."""
+    import bpy
+    from mathutils import Matrix
+
+    from bench.meshes import armadillo
+    from bench.views import AxisView
+    from skin_detach_addon import api
+    from skin_detach_addon.blender import mesh_io
+    body_points, body_triangles = armadillo(size)
+    parts = body_parts(body_points, body_triangles, ("eye", "plate", "bracelet"))
+    extent = np.ptp(body_points, axis=0)
+    middle = int(np.argsort(extent)[1])
+    mirrored = parts["eye"][0].copy()
+    centre = body_points[:, middle].mean()
+    mirrored[:, middle] = 2 * centre - mirrored[:, middle]
+    parts["eye2"] = (mirrored, parts["eye"][1][:, ::-1])
+    points, triangles, ranges = joined((body_points, body_triangles), parts)
+    scenario = bend_scenario(body_points)
+    diag = float(np.linalg.norm(np.ptp(points, axis=0)))
+    out = {"size": size, "vertices": int(points.shape[0]), "objects": len(ranges)}
+    bent = {}
+    for setup in ("joined", "separate"):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        if setup == "joined":
+            objects = [blender_mesh("character", points, triangles)]
+        else:
+            objects = [blender_mesh(kind, points[ids], _local(triangles, ids)) for kind, ids in ranges.items()]
+        start = time.perf_counter()
+        api.build(objects if setup == "separate" else objects[0], target_faces=faces)
+        out[f"build_{setup}_s"] = time.perf_counter() - start
+        owner = objects[0]
+        api.add_anchor(owner, scenario.anchor_ids)
+        handle = api.add_handle(owner, scenario.handle_ids)
+        rest_world = np.array(handle.matrix_world)
+        handle.matrix_world = Matrix((scenario.motion() @ rest_world).tolist())
+        api.deform(owner)
+        positions = np.empty_like(points)
+        for obj, ids in zip(objects, ranges.values()) if setup == "separate" else [(owner, np.arange(points.shape[0]))]:
+            positions[ids] = mesh_io.read_positions(obj.data)
+        bent[setup] = positions
+        if setup == "separate":
+            api.reset(owner)
+            handle.matrix_world = Matrix(rest_world.tolist())
+            bpy.context.view_layer.update()
+            view = AxisView(-np.eye(3)[int(np.argmin(extent))], scale=float(np.linalg.norm(extent)) / 1000.0)
+            origin = handle.matrix_world.to_translation()
+            centre_px = np.array(view.to_screen(origin))
+            target = np.array(view.to_screen(origin + type(origin)(scenario.shift.tolist())))
+            session = api.DragSession(owner, handle, view, tuple(centre_px))
+            times, mouse = [], tuple(centre_px)
+            for k in range(1, moves + 1):
+                mouse = tuple(centre_px + (target - centre_px) * k / moves)
+                start = time.perf_counter()
+                session.event("MOUSEMOVE", "NOTHING", mouse)
+                bpy.context.view_layer.update()
+                times.append(1000 * (time.perf_counter() - start))
+            start = time.perf_counter()
+            session.event("RET", "PRESS", mouse)
+            bpy.context.view_layer.update()
+            out.update(confirm_ms=1000 * (time.perf_counter() - start), move_ms_median=float(np.median(times)),
+                       move_ms_p95=float(np.percentile(times, 95)))
+    out["build_ratio"] = out["build_separate_s"] / out["build_joined_s"]
+    out["separate_vs_joined_diag"] = float(np.abs(bent["separate"] - bent["joined"]).max() / diag)
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--meshes", default=MESHES)
     parser.add_argument("--faces", type=int, default=1000)
     parser.add_argument("--moves", type=int, default=20)
     parser.add_argument("--at-least", type=int, default=25_000, help="flat-subdivide smaller bodies to this many vertices")
+    parser.add_argument("--several", default="300K", help="the character of several objects: the armadillo's "
+                        "size (bench.meshes.SIZES; '' for none)")
     parser.add_argument("--json")
     args = parser.parse_args()
     print("## Riders and several objects\n")
@@ -215,8 +294,19 @@ def main():
         for row in rows_for(name, args.faces, args.moves, args.at_least):
             rows.append(row)
             print("\n".join(table_lines(row)), flush=True)
+    figures = {"riders": rows}
+    if args.several and several_objects_supported():
+        print("\n## A character of several objects\n")
+        print("| body size | vertices | objects | build joined s | build as objects s | ratio (goal <= 1.2) | "
+              "move ms median / p95 (goal <= 16 median) | confirm ms | objects against the joined mesh (diag) |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        row = several_objects(args.several, args.faces, args.moves)
+        figures["several"] = row
+        print(f"| {row['size']} | {row['vertices']:,} | {row['objects']} | {row['build_joined_s']:.2f} | "
+              f"{row['build_separate_s']:.2f} | {row['build_ratio']:.2f} | {row['move_ms_median']:.1f} / "
+              f"{row['move_ms_p95']:.1f} | {row['confirm_ms']:.0f} | {row['separate_vs_joined_diag']:.1e} |", flush=True)
     if args.json:
-        report.save(args.json, {"riders": rows})
+        report.save(args.json, figures)
 
 
 if __name__ == "__main__":

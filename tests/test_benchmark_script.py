@@ -181,7 +181,7 @@ def test_quality_benchmark_proxy_angles_option_measures_the_proxy_beside_decimat
 def test_riders_benchmark_measures_each_part_beside_blenders_stack(tmp_path):
     script = BENCHMARK.parent / "benchmark_riders.py"
     run = subprocess.run([sys.executable, str(script), "--meshes", "cow", "--at-least", "3000", "--faces", "300",
-                          "--moves", "5", "--json", str(tmp_path / "r.json")], capture_output=True, text=True,
+                          "--moves", "5", "--several", "", "--json", str(tmp_path / "r.json")], capture_output=True, text=True,
                          timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "## Riders and several objects" in run.stdout
