@@ -175,7 +175,17 @@ def test_the_bound_file_grows_by_at_most_30_percent_of_the_plain_one(scene, tmp_
     assert bound <= 1.3 * plain, (bound, plain)
 
 
-def test_an_opened_file_is_bound_again_in_the_background_and_a_drag_asked_meanwhile_waits(scene, tmp_path):
+def test_an_opened_file_is_bound_again_in_the_background_and_a_drag_asked_meanwhile_waits(scene, tmp_path,
+                                                                                           monkeypatch):
+    import threading
+    threads_seen = []
+    make = binding.Opening.make
+
+    def recorded(self, *args, **kwargs):
+        threads_seen.append(threading.current_thread() is threading.main_thread())
+        return make(self, *args, **kwargs)
+
+    monkeypatch.setattr(binding.Opening, "make", recorded)
     obj = messy_box()
     api.build(obj, target_faces=60)
     top = api.add_handle(obj, np.flatnonzero(mesh_io.read_positions(obj.data)[:, 2] > 0.9), mirror="")
@@ -189,6 +199,7 @@ def test_an_opened_file_is_bound_again_in_the_background_and_a_drag_asked_meanwh
     assert idle_preparation.prepare_next() == idle_preparation.POLL  # started: made on the background thread
     assert binding._PENDING or binding.cached(obj) is not None  # under way, or (a quick machine) made
     api.deform(obj)                                            # waits for it, never raises
+    assert threads_seen == [False]  # made once, on a thread that is not the main one
     assert np.array_equal(mesh_io.read_positions(obj.data), expected)
     for _ in range(2000):
         if idle_preparation.prepare_next() is None:
