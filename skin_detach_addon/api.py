@@ -340,7 +340,7 @@ def handles_of(obj):
     """The handle and anchor empties of ``obj`` (bound or not, e.g. a file whose binding was
     lost), sorted by name; later names win where they share proxy vertices."""
     owner = _owner(obj)
-    return handles.handles_of(owner, stored.proxy_of(owner))
+    return handles.handles_of(owner)
 
 
 def is_handle(obj):
