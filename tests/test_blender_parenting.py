@@ -177,6 +177,7 @@ def make_old_style(obj):
     its transform the frame in the object's local space (its world matrix kept)."""
     bpy.context.view_layer.update()
     for empty in api.handles_of(obj):
+        del empty[handles.TAG]["parenting"]  # 0.1.0's record had none
         kept = empty.matrix_world.copy()
         empty.matrix_parent_inverse = Matrix.Identity(4)
         empty.matrix_world = kept
@@ -194,6 +195,7 @@ def test_handles_of_an_earlier_version_are_migrated_once_with_their_world_matric
     make_old_style(obj)
     wrist.keyframe_insert("location", frame=1)
     assert all(e.matrix_parent_inverse == Matrix.Identity(4) for e in api.handles_of(obj))
+    assert all(handles.value_of(e, "parenting") is None for e in api.handles_of(obj))
     assert np.abs(np.array(hand.matrix_basis) - world(hand)).max() > 1e-3  # old style: the basis is local
     worlds = {e.name: world(e) for e in api.handles_of(obj)}
     keyed_basis = np.array(wrist.matrix_basis)
@@ -216,6 +218,7 @@ def test_handles_of_an_earlier_version_are_migrated_once_with_their_world_matric
             assert np.array_equal(np.array(empty.matrix_basis), keyed_basis)
         else:
             assert np.abs(np.array(empty.matrix_basis) - world(empty)).max() <= 1e-6, f"{name}: not migrated"
+            assert handles.value_of(empty, "parenting") == handles.WORLD_PARENTING
     converted = {n: (np.array(e.matrix_parent_inverse), np.array(e.matrix_basis)) for n, e in empties.items()}
     binding.open_binding(obj)  # once: nothing left to do
     assert all(np.array_equal(np.array(e.matrix_parent_inverse), converted[n][0]) and

@@ -4,8 +4,9 @@ A handle carries its proxy vertices by the rigid motion of its empty since it wa
 bound object's local space, ``delta = object_world^-1 @ empty_world @ rest_local^-1`` applied to
 the rest proxy positions. An anchor holds its proxy vertices at rest wherever its empty is.
 Each empty stores under ``empty["_skin_detach_handle"]``: its owner (an ID pointer), kind,
-``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy) and ``rest_local``
-(16 float64, row-major). Handles made from detail vertices survive a Rebuild. Mirror twins
+``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy), ``rest_local``
+(16 float64, row-major) and ``parenting`` (:data:`WORLD_PARENTING`: parented to the proxy as
+Blender parents objects, its transform its world frame; none in files of earlier versions). Handles made from detail vertices survive a Rebuild. Mirror twins
 and symmetric rigs: :mod:`.handle_symmetry`.
 """
 
@@ -23,6 +24,10 @@ ANCHOR = "ANCHOR"
 #: Where an empty's rest frame sits: the selection's median point. Empties made by earlier
 #: versions have no "pivot" key: theirs sits at the centroid of the proxy vertices they hold.
 PIVOT = "selection median"
+#: A record's "parenting" when its empty was parented as Blender parents objects (its transform its
+#: world frame: :func:`_parent_in_world`); records of earlier versions have none
+#: (:func:`adopt_world_parenting` migrates them once).
+WORLD_PARENTING = "world"
 
 
 def is_handle(obj):
@@ -195,6 +200,7 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
         "group": str(group),
         "mirror": str(mirror),
         "pivot": PIVOT,
+        "parenting": WORLD_PARENTING,
     }
     return empty
 
@@ -266,21 +272,22 @@ def animated_transform(empty):
 def adopt_world_parenting(obj, proxy):
     """Migrate handles made by earlier versions (0.1.0: parented to the proxy with an identity
     parent inverse, so their transform was in the object's local space and Ctrl+P made them jump)
-    to Blender's parenting (:func:`_parent_in_world`): each handle or anchor of ``obj`` whose parent
-    is ``proxy`` with an identity parent inverse, under a proxy whose world matrix is not the
-    identity, gets the inverse of that matrix as its parent inverse and its world matrix as its
-    transform, so its world matrix is unchanged (to float32 rounding). Left as they are: handles
-    keyed or driven on their transform (:func:`animated_transform`: their keys are in the old
-    space) and those whose world frame Blender cannot store (sheared). The twins' sync record
-    follows the transform. Returns the names of the empties converted."""
+    to Blender's parenting (:func:`_parent_in_world`): each handle or anchor of ``obj`` whose record
+    has no "parenting" (made by an earlier version) and whose parent is ``proxy`` with an identity
+    parent inverse, under a proxy whose world matrix is not the identity, gets the inverse of that
+    matrix as its parent inverse and its world matrix as its transform, so its world matrix is
+    unchanged (to float32 rounding), and :data:`WORLD_PARENTING` in its record, so it is converted
+    once. Left as they are: handles keyed or driven on their transform (:func:`animated_transform`:
+    their keys are in the old space) and those whose world frame Blender cannot store (sheared).
+    The twins' sync record follows the transform. Returns the names of the empties converted."""
     chain = _chain_world(obj, proxy)
     if np.array_equal(chain, np.eye(4)):
         return []  # both conventions agree
     identity = Matrix.Identity(4)
     converted = []
     for empty in proxy.children:
-        if not is_handle(empty) or value_of(empty, "owner") != obj or empty.matrix_parent_inverse != identity \
-                or animated_transform(empty):
+        if not is_handle(empty) or value_of(empty, "owner") != obj or value_of(empty, "parenting") is not None \
+                or empty.matrix_parent_inverse != identity or animated_transform(empty):
             continue
         old = np.array(empty.matrix_basis, dtype=np.float64)
         world = chain @ old
@@ -291,6 +298,7 @@ def adopt_world_parenting(obj, proxy):
         synced = value_of(empty, "synced")
         if synced is not None and np.array_equal(np.asarray(synced, dtype=np.float64), old.ravel()):
             empty[TAG]["synced"] = np.array(empty.matrix_basis, dtype=np.float64).ravel()
+        empty[TAG]["parenting"] = WORLD_PARENTING
         converted.append(empty.name)
     return converted
 
@@ -355,6 +363,7 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
         del props[key]
         props[key] = value
     props["pivot"] = PIVOT
+    props["parenting"] = WORLD_PARENTING
 
 
 def has_old_pivot(empty):
