@@ -32,7 +32,7 @@ from ..core.detached_surface.symmetry import MIRROR_TOLERANCE, is_own_mirror_ima
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from ..core.proxy_solve import ProxySolves
-from . import handles, mesh_io
+from . import mesh_io
 from .mesh_guard import MeshGuard
 
 KEY = "_skin_detach"
@@ -403,6 +403,7 @@ def _adopt_world_parenting(obj, proxy):
     on the first use of the rig after it was opened (the background preparation after a load uses
     it first), and again after an undo back to before it (nothing is left to do on later calls).
     Said on the console."""
+    from . import handles  # handles needs mathutils; this module is read without Blender too (scripts/benchmark_scale.py)
     converted = handles.adopt_world_parenting(obj, proxy)
     if converted:
         print(f"Skin Detach: {obj.name}: {len(converted)} handle(s) of an earlier version now parented as Blender "
