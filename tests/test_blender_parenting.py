@@ -19,7 +19,9 @@ from mathutils import Matrix  # noqa: E402
 
 from blender_support import activate, imported_limb  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
+from bench.views import TopView  # noqa: E402
 from skin_detach_addon.blender import binding, handles, mesh_io  # noqa: E402
+from skin_detach_addon.blender.drag_session import FINISHED, DragSession  # noqa: E402
 
 #: A selection within this share of the diagonal of where its handle's world transform puts it.
 EXACT = 1e-5
@@ -129,6 +131,31 @@ def test_ctrl_p_hand_to_forearm_keeps_the_hand_where_it_is(scene, imported, keep
     turn_forearm(forearm, world_size(obj))
     assert np.abs(world(hand) - hand_world).max() > 1e-3 * world_size(obj)  # carried
     api.deform(obj)
+    assert off(obj, hand, parts["hand"]) <= EXACT
+    assert off(obj, forearm, parts["forearm"]) <= EXACT
+    assert max_stretch(obj) <= STRETCH
+
+
+def test_a_drag_of_the_forearm_carries_the_hand_and_its_vertices(scene):
+    """The forearm's empty dragged (a DragSession: moves, then the settle while the mouse rests,
+    then Enter, with nothing else evaluating Blender's depsgraph between them, as when the window
+    handles a move and a timer before it redraws), the hand's parented to it with Ctrl+P: the hand's
+    vertices end where the hand's empty is, not where it was one move before."""
+    obj, forearm, hand, parts = rigged(IMPORTS["FBX import (rotation X 90, scale 0.01)"])
+    select_and_make_active(hand, forearm)
+    assert bpy.ops.object.parent_set(type='OBJECT') == {'FINISHED'}
+    bpy.context.view_layer.update()
+    view = TopView(world_size(obj) / 1000.0)
+    centre = np.array(view.to_screen(forearm.matrix_world.to_translation()))
+    session = DragSession(obj, forearm, view, tuple(centre))
+    mouse = tuple(centre)
+    for k in range(1, 6):
+        mouse = tuple(centre + np.array((9.0, 6.0)) * k)
+        session.event("MOUSEMOVE", "NOTHING", mouse)
+    for _ in range(200):
+        if session.settle_slice():
+            break
+    assert session.event("RET", "PRESS", mouse) == FINISHED
     assert off(obj, hand, parts["hand"]) <= EXACT
     assert off(obj, forearm, parts["forearm"]) <= EXACT
     assert max_stretch(obj) <= STRETCH
