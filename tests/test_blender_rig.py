@@ -120,8 +120,9 @@ def test_apply_moves_the_handle_rigidly_keeps_anchors_and_reset_is_exact(scene):
                               binding.open_binding(obj).surface.proxy_vertices.astype(np.float32))
     assert bpy.ops.skin_detach.reset() == {'FINISHED'}
     assert np.array_equal(mesh_io.read_positions(obj.data), rest)
-    assert np.allclose(np.array(handle.matrix_basis)[:3, 3],
-                       handles.rest_local_of(handle)[:3, 3])
+    bpy.context.view_layer.update()
+    assert np.allclose(np.array(handle.matrix_world),  # back on its rest frame, in the world
+                       np.array(obj.matrix_world) @ handles.rest_local_of(handle), atol=1e-6)
 
 
 def test_thousands_of_applies_do_not_drift(scene):
