@@ -6,7 +6,7 @@ functions, so a script and a click do the same thing.
     api.build(obj, target_faces=1000)          # bind obj (n vertices) to a proxy of ~1,000 faces
     api.add_anchor(obj, base_ids)              # (k,) vertex indices of obj held in place
     grip = api.add_handle(obj, top_ids)        # an empty that carries those vertices
-    grip.location.x += 0.2
+    grip.location.x += 0.2                     # world space: its transform is its world matrix
     api.deform(obj)                            # solve from every handle, write obj's positions
     api.bake(obj, "1-250", into="FILES", path="out/mesh_####.obj")
     api.reset(obj); api.clear(obj)
@@ -359,7 +359,7 @@ def handles_of(obj):
     """The handle and anchor empties of ``obj`` (bound or not, e.g. a file whose binding was
     lost), sorted by name; later names win where they share proxy vertices."""
     owner = _owner(obj)
-    return handles.handles_of(owner, stored.proxy_of(owner))
+    return handles.handles_of(owner)
 
 
 def is_handle(obj):

@@ -126,3 +126,33 @@ def all_data(mesh):
 def vertex_group_weights(obj):
     mesh = obj.data
     return [[(g.group, g.weight) for g in v.groups] for v in mesh.vertices]
+
+
+def imported_limb(name="limb", scale=(1.0, 1.0, 1.0)):
+    """A limb of quads and ngons as an OBJ or FBX import leaves it: rotation X 90 degrees (the file's
+    Y up) and the object scale ``scale`` unapplied; the active object. Two parts: an arm 4 long along
+    its local X (a subdivided box, 1 x 0.6 across) and a loose bracelet near its end (a cylinder
+    with octagon caps). Returns (obj, {"shoulder", "forearm", "hand"}: vertex ids along the arm)."""
+    import bmesh
+    from mathutils import Matrix
+    mesh = bpy.data.meshes.new(name)
+    made = bmesh.new()
+    bmesh.ops.create_cube(made, size=1.0)
+    bmesh.ops.subdivide_edges(made, edges=made.edges[:], cuts=7, use_grid_fill=True)
+    bmesh.ops.scale(made, vec=(4.0, 1.0, 0.6), verts=made.verts[:])
+    bmesh.ops.create_cone(made, cap_ends=True, segments=8, radius1=0.7, radius2=0.7, depth=0.3,
+                          matrix=Matrix.Translation((1.2, 0.0, 0.0)) @ Matrix.Rotation(1.5708, 4, 'Y'))
+    made.to_mesh(mesh)
+    made.free()
+    obj = bpy.data.objects.new(name, mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.rotation_euler = (np.radians(90.0), 0.0, 0.0)
+    obj.scale = scale
+    activate(obj)
+    bpy.context.view_layer.update()
+    points = mesh_io.read_positions(mesh)
+    x, arm = points[:, 0], np.abs(points[:, 1]) <= 0.5 + 1e-6
+    arm &= np.abs(points[:, 2]) <= 0.3 + 1e-6
+    parts = {"shoulder": np.flatnonzero(arm & (x < -1.6)), "forearm": np.flatnonzero(arm & (x > 0.1) & (x < 0.9)),
+             "hand": np.flatnonzero(arm & (x > 1.5))}
+    return obj, parts

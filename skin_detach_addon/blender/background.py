@@ -88,7 +88,7 @@ def _asked_images(obj, binding):
     def record(ids, axis):
         asked.append((ids, axis))
         return True
-    handle_symmetry.symmetry_axis(obj, handles.handles_of(obj, binding.proxy), record)
+    handle_symmetry.symmetry_axis(obj, handles.handles_of(obj), record)
     return asked
 
 

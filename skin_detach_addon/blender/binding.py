@@ -393,7 +393,21 @@ def open_binding(obj):
         _wait(binding.busy, lambda: 0.5)  # its error, if any, is the background preparation's to report
         binding.busy = None
     binding.proxy = proxy  # never keep a Blender reference across undo or reload
+    _adopt_world_parenting(obj, proxy)
     return binding
+
+
+def _adopt_world_parenting(obj, proxy):
+    """The one place handles of files saved by earlier versions (0.1.0, an identity parent inverse
+    under the proxy) are migrated to Blender's parenting (:func:`.handles.adopt_world_parenting`):
+    on the first use of the rig after it was opened (the background preparation after a load uses
+    it first), and again after an undo back to before it (nothing is left to do on later calls).
+    Said on the console."""
+    from . import handles  # handles needs mathutils; this module is read without Blender too (scripts/benchmark_scale.py)
+    converted = handles.adopt_world_parenting(obj, proxy)
+    if converted:
+        print(f"Skin Detach: {obj.name}: {len(converted)} handle(s) of an earlier version now parented as Blender "
+              f"parents objects (world matrices unchanged): {', '.join(converted)}")
 
 
 def begin_opening(obj):

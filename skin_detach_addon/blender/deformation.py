@@ -80,7 +80,7 @@ class Deformation:
 
     def handles(self):
         """The handle and anchor empties of the object, sorted by name."""
-        return handles.handles_of(self.obj, self.proxy)
+        return handles.handles_of(self.obj)
 
     def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`, the held

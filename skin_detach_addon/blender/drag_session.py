@@ -15,7 +15,7 @@ from mathutils import Matrix, Vector
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from . import binding as stored
-from . import mesh_io
+from . import handles, mesh_io
 from .deformation import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
@@ -109,6 +109,9 @@ class DragSession:
         if self.previewing:
             self.deformation.binding.mesh_guard.arm()
         self.start = empty.matrix_world.copy()
+        #: Handles' empties parented under the dragged one (a hand's under the forearm's): their
+        #: world matrices are evaluated again after every move, before the solve reads them.
+        self._carries = any(handles.is_handle(child) for child in empty.children_recursive)
         self.pivot = self.start.to_translation()
         self.mode, self.axis = "MOVE", None
         self.translation, self.angle = Vector((0.0, 0.0, 0.0)), 0.0
@@ -273,6 +276,9 @@ class DragSession:
     def _place(self, translation, angle, stretch):
         self.motion = self._motion(translation, angle, stretch)
         self.empty.matrix_world = moved_matrix(self.start, *self.motion)
+        if self._carries:  # else the solve would read their world matrices of the move before
+            import bpy
+            bpy.context.view_layer.update()
         self._show(DRAG_TOL, DRAG_BUDGET_MS)
         self.step_ms.append(self.last.milliseconds)
 

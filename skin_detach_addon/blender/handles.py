@@ -4,8 +4,9 @@ A handle carries its proxy vertices by the rigid motion of its empty since it wa
 bound object's local space, ``delta = object_world^-1 @ empty_world @ rest_local^-1`` applied to
 the rest proxy positions. An anchor holds its proxy vertices at rest wherever its empty is.
 Each empty stores under ``empty["_skin_detach_handle"]``: its owner (an ID pointer), kind,
-``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy) and ``rest_local``
-(16 float64, row-major). Handles made from detail vertices survive a Rebuild. Mirror twins
+``proxy_ids`` (int32), ``detail_ids`` (int32, empty when made from the proxy), ``rest_local``
+(16 float64, row-major) and ``parenting`` (:data:`WORLD_PARENTING`: parented to the proxy as
+Blender parents objects, its transform its world frame; none in files of earlier versions). Handles made from detail vertices survive a Rebuild. Mirror twins
 and symmetric rigs: :mod:`.handle_symmetry`.
 """
 
@@ -23,6 +24,10 @@ ANCHOR = "ANCHOR"
 #: Where an empty's rest frame sits: the selection's median point. Empties made by earlier
 #: versions have no "pivot" key: theirs sits at the centroid of the proxy vertices they hold.
 PIVOT = "selection median"
+#: A record's "parenting" when its empty was parented as Blender parents objects (its transform its
+#: world frame: :func:`_parent_in_world`); records of earlier versions have none
+#: (:func:`adopt_world_parenting` migrates them once).
+WORLD_PARENTING = "world"
 
 
 def is_handle(obj):
@@ -111,12 +116,12 @@ def _invertible_affine(rows):
     return bottom == [0.0, 0.0, 0.0, 1.0] and a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) != 0.0
 
 
-def handles_of(obj, proxy=None):
-    """Handle and anchor empties of ``obj``, oldest first (the newer wins on shared vertices; see
-    :func:`.core.detached_surface.held_detail.owned_pairs`); with ``proxy``, those under it at any
-    depth (an artist may parent a hand's empty to the forearm's)."""
-    pool = proxy.children_recursive if proxy is not None else _all_objects()
-    found = [o for o in pool if is_handle(o) and value_of(o, "owner") == obj]
+def handles_of(obj):
+    """Handle and anchor empties of ``obj`` (their records name it as owner), oldest first (the
+    newer wins on shared vertices; see :func:`.core.detached_surface.held_detail.owned_pairs`),
+    wherever they hang: under the proxy, under another handle's empty (a hand's parented to the
+    forearm's, Ctrl+P) or anywhere else (Alt+P cleared its parent)."""
+    found = [o for o in _all_objects() if is_handle(o) and value_of(o, "owner") == obj]
     ages = _ages(found)
     return sorted(found, key=lambda o: ages[o.name])
 
@@ -184,7 +189,7 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
     _parent_in_world(obj, empty, proxy, now_centroid)
     rest_local = np.eye(4)
     rest_local[:3, 3] = rest_centroid
-    serial = next_serial(handles_of(obj, proxy))
+    serial = next_serial(handles_of(obj))
     empty[TAG] = {
         "owner": obj,
         "serial": serial,
@@ -195,6 +200,7 @@ def add(obj, proxy, kind, proxy_ids, rest_center, now_center, detail_ids=None, s
         "group": str(group),
         "mirror": str(mirror),
         "pivot": PIVOT,
+        "parenting": WORLD_PARENTING,
     }
     return empty
 
@@ -207,31 +213,94 @@ def _chain_world(obj, proxy):
 
 
 def _parent_in_world(obj, empty, proxy, centre):
-    """Parent ``empty`` to ``proxy`` at ``centre`` (3,) in the bound object's local space. Where the
-    object's world matrix scales its axes alike (the usual case) the empty's transform is that local
-    frame (identity parent inverse: ``handle.location`` is in the object's local space). Under a
-    non-uniform scale (the object's own or a parent's) a world rotation of that frame, an R in a
-    drag, is a sheared matrix Blender cannot store (it stored a 3.5 times stretch for R 90): there
-    the proxy's world matrix is the parent inverse and the empty's transform its world transform,
-    which a rotation keeps a rotation and scale. Where even that is sheared (a rotated child of a
-    non-uniformly scaled parent) the local frame stays."""
+    """Parent ``empty`` to ``proxy`` at ``centre`` (3,) in the bound object's local space as Blender
+    parents an object (Ctrl+P): the parent inverse is the inverse of the proxy's world matrix (its
+    chain from the object, :func:`_chain_world`) and the empty's transform is its world transform,
+    so its world matrix is its basis (``handle.location`` is in world space, as for any child
+    object). Ctrl+P, Alt+P and Keep Transform then keep it where it is, and a world rotation of
+    it (an R in a drag) stays a rotation under a non-uniform scale of the object. Where that world
+    frame is sheared (a rotated child of a non-uniformly scaled parent), which Blender cannot store
+    as location, rotation and scale, the parent inverse is the identity and the transform the
+    local frame."""
     chain = _chain_world(obj, proxy)
     frame = np.eye(4)
     frame[:3, 3] = centre
-    empty.parent = proxy
-    empty.matrix_parent_inverse = Matrix.Identity(4)
-    empty.matrix_basis = Matrix(frame.tolist())
-    gram = chain[:3, :3].T @ chain[:3, :3]
-    if np.abs(gram - np.eye(3) * np.trace(gram) / 3.0).max() <= 1e-6 * np.trace(gram):
-        return  # a similarity: rotations in the world are rotations in the local frame
     wanted = chain @ frame
-    empty.matrix_parent_inverse = Matrix(np.linalg.inv(chain).tolist())
-    empty.matrix_basis = Matrix(wanted.tolist())
-    # Blender keeps a transform as float32 location, rotation and scale: a shear shows as an
-    # error of the order of the matrix itself, float32 rounding as one of 1e-7 of it.
-    if np.abs(np.array(empty.matrix_basis) - wanted).max() > 1e-5 * max(1.0, float(np.abs(wanted).max())):
+    empty.parent = proxy
+    if not _storable(wanted):
         empty.matrix_parent_inverse = Matrix.Identity(4)
         empty.matrix_basis = Matrix(frame.tolist())
+        return
+    empty.matrix_parent_inverse = Matrix(np.linalg.inv(chain).tolist())
+    empty.matrix_basis = Matrix(wanted.tolist())
+
+
+def _storable(matrix):
+    """Blender keeps a transform as float32 location, rotation and scale: ``matrix`` (4, 4) survives
+    that within float32 rounding (a shear shows as an error of the order of the matrix itself,
+    rounding as one of 1e-7 of it)."""
+    location, rotation, scale = Matrix(np.asarray(matrix).tolist()).decompose()
+    kept = np.array(Matrix.LocRotScale(location, rotation, scale), dtype=np.float64)
+    return bool(np.abs(kept - matrix).max() <= 1e-5 * max(1.0, float(np.abs(matrix).max())))
+
+
+#: Data paths of an object's own transform: a handle keyed or driven on one of them is left as it is
+#: by :func:`adopt_world_parenting`.
+TRANSFORM_PATHS = ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle", "scale",
+                   "delta_location", "delta_rotation_euler", "delta_rotation_quaternion", "delta_scale")
+
+
+def animated_transform(empty):
+    """The empty's transform is keyed or driven (an F-curve or driver on one of
+    :data:`TRANSFORM_PATHS`)."""
+    animation = empty.animation_data
+    if animation is None:
+        return False
+    curves = list(animation.drivers)
+    action = animation.action
+    if action is not None:
+        slot = getattr(animation, "action_slot", None)
+        if slot is None:
+            curves += list(action.fcurves)
+        else:
+            from bpy_extras import anim_utils
+            channelbag = anim_utils.action_get_channelbag_for_slot(action, slot)
+            curves += [] if channelbag is None else list(channelbag.fcurves)
+    return any(curve.data_path in TRANSFORM_PATHS for curve in curves)
+
+
+def adopt_world_parenting(obj, proxy):
+    """Migrate handles made by earlier versions (0.1.0: parented to the proxy with an identity
+    parent inverse, so their transform was in the object's local space and Ctrl+P made them jump)
+    to Blender's parenting (:func:`_parent_in_world`): each handle or anchor of ``obj`` whose record
+    has no "parenting" (made by an earlier version) and whose parent is ``proxy`` with an identity
+    parent inverse, under a proxy whose world matrix is not the identity, gets the inverse of that
+    matrix as its parent inverse and its world matrix as its transform, so its world matrix is
+    unchanged (to float32 rounding), and :data:`WORLD_PARENTING` in its record, so it is converted
+    once. Left as they are: handles keyed or driven on their transform (:func:`animated_transform`:
+    their keys are in the old space) and those whose world frame Blender cannot store (sheared).
+    The twins' sync record follows the transform. Returns the names of the empties converted."""
+    chain = _chain_world(obj, proxy)
+    if np.array_equal(chain, np.eye(4)):
+        return []  # both conventions agree
+    identity = Matrix.Identity(4)
+    converted = []
+    for empty in proxy.children:
+        if not is_handle(empty) or value_of(empty, "owner") != obj or value_of(empty, "parenting") is not None \
+                or empty.matrix_parent_inverse != identity or animated_transform(empty):
+            continue
+        old = np.array(empty.matrix_basis, dtype=np.float64)
+        world = chain @ old
+        if not np.isfinite(world).all() or not _storable(world):
+            continue
+        empty.matrix_parent_inverse = Matrix(np.linalg.inv(chain).tolist())
+        empty.matrix_basis = Matrix(world.tolist())
+        synced = value_of(empty, "synced")
+        if synced is not None and np.array_equal(np.asarray(synced, dtype=np.float64), old.ravel()):
+            empty[TAG]["synced"] = np.array(empty.matrix_basis, dtype=np.float64).ravel()
+        empty[TAG]["parenting"] = WORLD_PARENTING
+        converted.append(empty.name)
+    return converted
 
 
 def place_at_rest(obj, empties):
@@ -248,12 +317,13 @@ def place_at_rest(obj, empties):
         for empty in level:
             parent = empty.parent
             if parent is None:
-                above = np.eye(4)
-            elif not is_handle(parent) and parent.parent == obj:  # the proxy
-                above = _chain_world(obj, parent)
+                above = np.eye(4)  # Blender ignores the parent inverse of an object without a parent
             else:
-                above = np.array(parent.matrix_world, dtype=np.float64)
-            above = above @ np.array(empty.matrix_parent_inverse, dtype=np.float64)
+                if not is_handle(parent) and parent.parent == obj:  # the proxy
+                    above = _chain_world(obj, parent)
+                else:
+                    above = np.array(parent.matrix_world, dtype=np.float64)
+                above = above @ np.array(empty.matrix_parent_inverse, dtype=np.float64)
             empty.matrix_basis = Matrix((np.linalg.solve(above, world @ frames[empty.name])).tolist())
         pending = [e for e in pending if e not in level]
         if pending:
@@ -293,6 +363,7 @@ def rebind(empty, proxy, proxy_ids, rest_centroid):
         del props[key]
         props[key] = value
     props["pivot"] = PIVOT
+    props["parenting"] = WORLD_PARENTING
 
 
 def has_old_pivot(empty):

@@ -334,7 +334,7 @@ def _write_build(obj, surface, positions):
         else:
             handles.remove(empty)
             removed += 1
-    handles.place_at_rest(obj, handles.handles_of(obj, proxy))  # children of other handles: after them
+    handles.place_at_rest(obj, handles.handles_of(obj))  # children of other handles: after them
     stats = dict(surface.stats)
     stats["handles_kept"], stats["handles_removed"] = kept, removed
     return stats

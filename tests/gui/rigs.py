@@ -102,3 +102,66 @@ def drag(ui, dx, dy, steps=8, keys=(), confirm='RET'):
     yield 0.5
     if confirm:
         yield from ui.press(confirm, wait=0.5)
+
+
+def imported_limb(ui, scale=(0.6, 0.6, 0.6)):
+    """A limb of quads and ngons as an OBJ or FBX import leaves it (rotation X 90 degrees, an
+    unapplied scale ``scale``), the only mesh in the scene: an arm 4 long along its local X (a
+    subdivided box) and a loose bracelet with octagon caps near its end; bound, its shoulder
+    anchored, its forearm and hand handles. Returns (obj, forearm empty, hand empty, hand ids)."""
+    import bmesh
+    from mathutils import Matrix
+    with override(ui):
+        cube = bpy.data.objects.get("Cube")
+        if cube is not None:
+            bpy.data.objects.remove(cube)
+    mesh = bpy.data.meshes.new("limb")
+    made = bmesh.new()
+    bmesh.ops.create_cube(made, size=1.0)
+    bmesh.ops.subdivide_edges(made, edges=made.edges[:], cuts=7, use_grid_fill=True)
+    bmesh.ops.scale(made, vec=(4.0, 1.0, 0.6), verts=made.verts[:])
+    bmesh.ops.create_cone(made, cap_ends=True, segments=8, radius1=0.7, radius2=0.7, depth=0.3,
+                          matrix=Matrix.Translation((1.2, 0.0, 0.0)) @ Matrix.Rotation(1.5708, 4, 'Y'))
+    made.to_mesh(mesh)
+    made.free()
+    obj = bpy.data.objects.new("limb", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.rotation_euler = (np.radians(90.0), 0.0, 0.0)
+    obj.scale = scale
+    bpy.context.view_layer.update()
+    points = positions(obj)
+    x = points[:, 0]
+    arm = (np.abs(points[:, 1]) <= 0.5 + 1e-6) & (np.abs(points[:, 2]) <= 0.3 + 1e-6)
+    sd = api()
+    sd.build(obj, target_faces=300)
+    sd.add_anchor(obj, np.flatnonzero(arm & (x < -1.6)), mirror="")
+    forearm = sd.add_handle(obj, np.flatnonzero(arm & (x > 0.1) & (x < 0.9)), mirror="")
+    hand_ids = np.flatnonzero(arm & (x > 1.5))
+    hand = sd.add_handle(obj, hand_ids, mirror="")
+    activate(ui, hand)
+    undo_push(ui, "Rig")
+    return obj, forearm, hand, hand_ids
+
+
+def held_off(obj, empty, ids):
+    """Largest distance of the mesh vertices ``ids`` from where ``empty``'s world matrix puts them
+    (its motion in the object's space from its rest frame, ``obj_world^-1 @ empty_world @
+    rest_local^-1``, on their rest positions), over the rest diagonal."""
+    bpy.context.view_layer.update()
+    rest = api().rest_positions(obj).astype(np.float64)
+    record = empty["_skin_detach_handle"]
+    rest_local = np.array(record["rest_local"], dtype=np.float64).reshape(4, 4)
+    motion = np.linalg.solve(np.array(obj.matrix_world), np.array(empty.matrix_world)) @ np.linalg.inv(rest_local)
+    want = rest[ids] @ motion[:3, :3].T + motion[:3, 3]
+    size = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
+    return float(np.linalg.norm(positions(obj)[ids].astype(np.float64) - want, axis=1).max()) / size
+
+
+def max_stretch(obj):
+    """Largest ratio of an edge's length now to its rest length (the mesh's own space)."""
+    edges = np.empty(2 * len(obj.data.edges), dtype=np.int32)
+    obj.data.edges.foreach_get("vertices", edges)
+    edges = edges.reshape(-1, 2)
+    rest, now = api().rest_positions(obj).astype(np.float64), positions(obj).astype(np.float64)
+    before = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+    return float((np.linalg.norm(now[edges[:, 0]] - now[edges[:, 1]], axis=1) / before).max())
