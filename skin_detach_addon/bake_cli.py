@@ -171,7 +171,8 @@ def run(args):
                        preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress,
                        stretch=args.stretch)
     if not to_blend:
-        missing = [r["frame"] for r in records if not os.path.isfile(r["output"])]
+        missing = [r["frame"] for r in records  # a rig of several objects: one file per object
+                   if not all(os.path.isfile(f) for f in (r["output"] if isinstance(r["output"], list) else [r["output"]]))]
         if len(records) != len(frames) or missing:
             raise BakeFailed(f"--output: expected one file for each of the {len(frames)} frames, "
                              f"{len(records) - len(missing)} were written (missing frames: "

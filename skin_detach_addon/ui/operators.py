@@ -80,7 +80,8 @@ def build_report(stats):
     kept = f"; {stats['handles_kept']} handles kept" if stats["handles_kept"] else ""
     dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
     preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
-    return (f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
+    objects = f"{stats['objects']} objects, " if stats.get("objects", 1) > 1 else ""
+    return (f"Skin Detach: {objects}{stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
             f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
             f"{stats['case3']:,}){preview}{kept}{dropped}")
 
@@ -117,8 +118,14 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
         return obj is not None and obj.type == 'MESH' and obj.name not in BUILDS
 
     def _settings(self, context):
-        """The mesh to build, Object Mode left, the unset properties given the panel's values."""
+        """The mesh to build (with several meshes selected, the list of them: the active one
+        first, the rig's owner), Object Mode left, the unset properties given the panel's values."""
         obj = api.mesh_of(context.active_object)
+        # Other selected meshes that are no part of a rig (not a proxy, preview or this rig's object).
+        others = [o for o in (getattr(context, "selected_objects", None) or ())
+                  if o.type == 'MESH' and o != obj and api.mesh_of(o) == o]
+        if others and obj is not None:  # several meshes selected: one rig of all of them (and of the rig's own)
+            obj = (api.members(obj) if api.is_bound(obj) else [obj]) + others
         leave_edit_mode(context)
         settings = context.scene.skin_detach
         for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
