@@ -417,3 +417,64 @@ def test_build_refuses_a_member_of_another_rig_and_a_list_of_one_binds_it_alone(
         api.build([lamp, body], target_faces=TARGET_FACES)
     api.build([body], target_faces=TARGET_FACES)  # a list of one: the body alone
     assert api.members(body) == [body] and not api.is_bound(parts[0])
+
+
+def test_a_drag_writes_every_object_and_its_cancel_restores_each_bit_for_bit(scene):
+    from blender_support import TopView
+    from skin_detach_addon.blender.drag_session import DragSession
+    body, members, lamp, stats, anchor, handle, low, top = rigged(scene)
+    belt = bpy.data.objects["belt"]  # a member with shape keys: kept as offsets from the Basis
+    belt.shape_key_add(name="Basis")
+    flex = belt.shape_key_add(name="flex")
+    flex.data[0].co.z += 0.1
+    before = bits(members)
+    session = DragSession(body, handle, TopView(0.01), (100, 100))
+    session.event("MOUSEMOVE", "NOTHING", (140, 120))
+    assert not same_bits_quiet(before, bits(members))
+    eye = bpy.data.objects["eye_L"]
+    assert not same_bits_quiet(before[3:4], bits([eye]))
+    assert session.event("RIGHTMOUSE", "PRESS", (140, 120)) == "CANCELLED"
+    assert same_bits(before, bits(members))
+    session = DragSession(body, handle, TopView(0.01), (100, 100))
+    session.event("MOUSEMOVE", "NOTHING", (140, 120))
+    assert session.event("LEFTMOUSE", "PRESS", (140, 120)) == "FINISHED"
+    assert binding.holds_written(body)  # the confirm recorded what every object holds
+    keys = {b.name: np.array([v.co[:] for v in b.data]) for b in belt.data.shape_keys.key_blocks}
+    assert np.allclose(keys["flex"] - keys["Basis"], before[1][1]["flex"].reshape(-1, 3)
+                       - before[1][1]["Basis"].reshape(-1, 3), atol=1e-6)
+
+
+def test_the_build_button_with_several_meshes_selected_says_so_and_the_panel_lists_them(scene, capfd):
+    body, parts, lamp = character()
+    bpy.context.scene.skin_detach.target_faces = TARGET_FACES
+    capfd.readouterr()
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    n = sum(len(o.data.vertices) for o in [body] + parts)
+    out = capfd.readouterr().out
+    assert f"Skin Detach: 5 objects, {n:,} vertices bound" in out, out
+    from test_blender_rig import _draw_panel
+    activate(parts[2])  # the belt: the panel shows its rig
+    labels = [value for kind, value in _draw_panel() if kind == "label"]
+    assert "Objects: 5" in labels
+    assert [value.strip() for value in labels[labels.index("Objects: 5") + 1:][:5]] == \
+        ["body (owner)", "belt", "boot", "eye_L", "eye_R"]
+    # Build again with only the rig's owner selected: the whole rig is rebuilt (a Rebuild).
+    activate(body)
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    assert len(api.members(body)) == 5
+
+
+def test_show_stretch_paints_every_object_its_own_slice(scene):
+    body, members, lamp, stats, anchor, handle, low, top = rigged(scene)
+    moved(handle)
+    api.deform(body)
+    api.show_stretch(bpy.data.objects["eye_R"])
+    stretch = api.stretch(body)
+    ranges = api.member_ranges(body)
+    for obj in members:
+        assert mesh_io.stretch_shown(obj.data)
+        first, stop = ranges[obj]
+        assert np.array_equal(mesh_io.read_point_floats(obj.data, mesh_io.STRETCH), stretch[first:stop])
+    assert stretch.max() > 0.0
+    api.show_stretch(body, False)
+    assert not any(mesh_io.stretch_shown(o.data) for o in members)
