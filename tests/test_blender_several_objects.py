@@ -320,6 +320,17 @@ def test_a_member_changed_is_named_and_nothing_is_written(scene, change, words):
         assert same_bits(before, bits(others))
         assert same_bits(proxy, bits([api.proxy_of(body)]))
         assert all(o.data.shape_keys is None for o in others)
+    if change is _edit_mode:
+        bpy.ops.object.mode_set(mode='OBJECT')
+    api.build(body, target_faces=TARGET_FACES)  # Rebuild: the rig as it is now (a deleted or unlinked object left out)
+    api.deform(body)
+    expected = [o.name for o in members if o is not belt or change not in (_delete, _unlink)]
+    assert [o.name for o in api.members(body)] == expected
+    # The handles kept their vertices: each id followed its object's vertex to its new place.
+    from skin_detach_addon.blender import handles
+    ranges = api.member_ranges(body)
+    ids = np.sort(np.concatenate([top[o] + ranges[o][0] for o in top]))
+    assert np.array_equal(handles.detail_ids_of(handle), ids)
 
 
 def test_a_renamed_member_still_works_and_a_member_active_stands_for_the_rig(scene):

@@ -310,11 +310,16 @@ class BuildJob:
 
 def _write_build(obj, surface, positions, members=None, local_rest=None):
     """Replace ``obj``'s binding by the core ``surface`` of its (n, 3) ``positions`` (see :func:`build`)."""
-    mesh = obj.data
     old = []  # (empty, its detail ids or None, its mirror axis): read before anything changes
+    remap = _id_remap(obj, members or [obj])
     for empty in handles.handles_of(obj):
         try:
-            old.append((empty, handles.detail_ids_of(empty, surface.n_detail), handle_symmetry.mirror_of(empty)))
+            if remap is None:
+                ids = handles.detail_ids_of(empty, surface.n_detail)
+            else:  # a rig of several objects: each id follows its object's vertex to its new place
+                ids = remap(handles.detail_ids_of(empty))
+                _store_detail_ids(empty, ids)
+            old.append((empty, ids, handle_symmetry.mirror_of(empty)))
         except SkinDetachError:
             old.append((empty, None, ""))  # damaged: removed below
     _remove_proxy(obj)
@@ -347,6 +352,39 @@ def _write_build(obj, surface, positions, members=None, local_rest=None):
     stats["handles_kept"], stats["handles_removed"] = kept, removed
     stats["objects"] = len(members or [obj])
     return stats
+
+
+def _id_remap(obj, members):
+    """For a rebuild where the rig's objects change (several before or after): a function mapping
+    the handles' old combined ids to new ones, each id kept with its object's vertex (ids of an
+    object no longer in the rig, or whose vertex count changed, dropped); None when ``obj`` is a
+    single object before and after (ids stay as they are)."""
+    if not stored.has_binding(obj) or (not rig_members.is_multi(obj) and len(members) == 1):
+        return None
+    before, old_bounds = rig_members.objects(obj), rig_members.offsets(obj)
+    old_counts = np.diff(old_bounds)
+    new_bounds = np.concatenate([[0], np.cumsum([len(o.data.vertices) for o in members])])
+
+    def remap(ids):
+        out = []
+        for k, member in enumerate(before):
+            if member is None or member not in members:
+                continue
+            j = members.index(member)
+            if new_bounds[j + 1] - new_bounds[j] != old_counts[k]:
+                continue
+            inside = ids[(ids >= old_bounds[k]) & (ids < old_bounds[k + 1])]
+            out.append(inside - old_bounds[k] + new_bounds[j])
+        return np.sort(np.concatenate(out)) if out else np.zeros(0, dtype=np.int64)
+    return remap
+
+
+def _store_detail_ids(empty, ids):
+    """Replace the detail ids a handle stores (see :mod:`.handles`)."""
+    props = empty[handles.TAG]
+    if "detail_ids" in props:
+        del props["detail_ids"]  # assigning over an ID-property array keeps its old length
+    props["detail_ids"] = np.asarray(ids, dtype=np.int32)
 
 
 def _new_mesh_object(name, points, faces, owner, tag):
