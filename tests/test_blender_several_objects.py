@@ -489,3 +489,23 @@ def test_show_stretch_paints_every_object_its_own_slice(scene):
     assert stretch.max() > 0.0
     api.show_stretch(body, False)
     assert not any(mesh_io.stretch_shown(o.data) for o in members)
+
+
+def test_build_with_a_new_mesh_selected_beside_an_object_of_a_rig_adds_it_to_that_rig(scene):
+    body, parts, lamp = character()
+    eye_l, eye_r, belt, boot = parts
+    api.build([body, eye_l], target_faces=TARGET_FACES)
+    handle = api.add_handle(body, {eye_l: np.arange(len(eye_l.data.vertices))})
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(obj in (eye_l, boot))
+    bpy.context.view_layer.objects.active = eye_l  # an object of the rig active, a new mesh selected
+    bpy.context.scene.skin_detach.target_faces = TARGET_FACES
+    assert bpy.ops.skin_detach.build() == {'FINISHED'}
+    assert api.members(body) == [body, boot, eye_l]
+    ranges = api.member_ranges(body)
+    from skin_detach_addon.blender import handles
+    assert np.array_equal(handles.detail_ids_of(handle), np.arange(*ranges[eye_l]))  # it kept the eye's vertices
+    with pytest.raises(api.SkinDetachError, match=r"obj\[1\]: expected a mesh object, got None"):
+        api.build([body, None])
+    with pytest.raises(api.SkinDetachError, match="one twice"):
+        api.build([body, eye_l, eye_l])
