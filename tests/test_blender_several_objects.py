@@ -509,3 +509,21 @@ def test_build_with_a_new_mesh_selected_beside_an_object_of_a_rig_adds_it_to_tha
         api.build([body, None])
     with pytest.raises(api.SkinDetachError, match="one twice"):
         api.build([body, eye_l, eye_l])
+
+
+def test_the_bake_command_line_bakes_every_object_of_a_rig_into_its_own_files(scene, tmp_path):
+    from skin_detach_addon import bake_cli
+    body, members, lamp, stats, anchor, handle, low, top = rigged(scene)
+    handle.keyframe_insert("location", frame=1)
+    handle.location.z += 0.2
+    handle.keyframe_insert("location", frame=2)
+    path = tmp_path / "character.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    names = [o.name for o in members]
+    try:
+        bake_cli.main(["--blend", str(path), "--object", "eye_R", "--frames", "1-2",
+                       "--output", str(tmp_path / "out" / "c_####.obj")])
+    except SystemExit as stop:
+        assert stop.code in (0, None)
+    assert sorted(os.listdir(tmp_path / "out")) == sorted(f"c_{name}_{frame:04d}.obj" for name in names
+                                                          for frame in (1, 2))
