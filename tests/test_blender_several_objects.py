@@ -527,3 +527,13 @@ def test_the_bake_command_line_bakes_every_object_of_a_rig_into_its_own_files(sc
         assert stop.code in (0, None)
     assert sorted(os.listdir(tmp_path / "out")) == sorted(f"c_{name}_{frame:04d}.obj" for name in names
                                                           for frame in (1, 2))
+    try:  # --verify (a farm job's last task) finds every object's file
+        bake_cli.main(["--blend", str(path), "--frames", "1-2", "--verify", "--output",
+                       str(tmp_path / "out" / "c_####.obj")])
+    except SystemExit as stop:
+        assert stop.code in (0, None)
+    os.remove(tmp_path / "out" / "c_eye_L_0002.obj")
+    with pytest.raises(SystemExit) as stop:
+        bake_cli.main(["--blend", str(path), "--frames", "1-2", "--verify", "--output",
+                       str(tmp_path / "out" / "c_####.obj")])
+    assert stop.value.code == 1
