@@ -11,14 +11,16 @@ functions, so a script and a click do the same thing.
     api.bake(obj, "1-250", into="FILES", path="out/mesh_####.obj")
     api.reset(obj); api.clear(obj)
 
-Every function takes the bound mesh object (its proxy or one of its handles are accepted and
-mean the same mesh) and raises :class:`SkinDetachError` with a message naming the argument,
+Every function takes the bound mesh object (its proxy, one of its handles, or any object of a
+rig of several objects are accepted and mean the same rig; so is a list whose first is its
+owner) and raises :class:`SkinDetachError` with a message naming the argument,
 the expected and the actual value; nothing is written when it raises.
 """
 
 import numpy as np
 
-from .blender import background, baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, skin_rig
+from .blender import (background, baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, rig_members,
+                      skin_rig)
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
 from .blender.deformation import DRAG_TOL, SETTLE_TOL, Deformation
@@ -33,15 +35,19 @@ from .core.validation import as_vertex_ids
 
 __all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
-           "remove_handle", "handle_conflicts", "set_parts", "part_overrides", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
+           "remove_handle", "handle_conflicts", "set_parts", "part_overrides", "is_rig_part", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
            "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
-           "handle_mirror", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
+           "handle_mirror", "members", "member_ranges", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
 HANDLE, ANCHOR = handles.HANDLE, handles.ANCHOR
 
 
 def _owner(obj):
+    if isinstance(obj, (list, tuple)):  # a rig given as its objects: the first is its owner
+        if not obj:
+            raise SkinDetachError("obj: expected a mesh object or a non-empty list of them, got an empty list")
+        obj = obj[0]
     owner = skin_rig.mesh_of(obj)
     if owner is None:
         raise SkinDetachError("obj: expected a mesh object, got None")
@@ -58,7 +64,11 @@ def _bound(obj):
 
 def build(obj, target_faces=1000, normal_test=True, progress=None, preview_above=PREVIEW_ABOVE):
     """Bind ``obj`` (a mesh object in Object Mode) to a proxy of about ``target_faces`` triangles
-    and make the proxy object; returns the build figures (dict: seconds per stage, proxy_faces,
+    and make the proxy object. ``obj`` may be a list of mesh objects posed as one (a character's
+    body, eyes, belt...): ONE rig for all of them, owned by the first (it holds the binding and the
+    proxy), its *members* the first then the others sorted by name (:func:`members`); vertex ids
+    of such a rig are combined ids (:func:`member_ranges`). A single object that is an object of
+    a rig of several rebuilds that whole rig; a list of one binds that object alone. Returns the build figures (dict: seconds per stage, proxy_faces,
     preview_vertices, case1/2/3 counts, handles_kept, ...). A previous binding is replaced:
     handles made from mesh vertices are kept (back at rest), those made from proxy vertices are
     removed. ``progress(fraction, stage)`` is called as the build goes.
@@ -84,11 +94,43 @@ def start_build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_
     if preview_above is not None and (isinstance(preview_above, bool) or not isinstance(preview_above, (int, np.integer))
                                       or preview_above < 0):
         raise SkinDetachError(f"preview_above: expected None or a vertex count >= 0, got {preview_above!r}")
-    obj = _owner(obj)
-    skin_rig.check_mesh_object(obj)
-    if obj.mode == 'EDIT' or obj.data.is_editmode:
-        raise SkinDetachError(f"obj {obj.name!r}: expected Object Mode, its mesh is in Edit Mode")
-    return BuildJob(obj, target_faces, normal_test, preview_above, _shown_pose(obj))
+    objs = _build_members(obj)
+    obj = objs[0]
+    for member in objs:
+        if member.mode == 'EDIT' or member.data.is_editmode:
+            raise SkinDetachError(f"obj {member.name!r}: expected Object Mode, its mesh is in Edit Mode")
+    return BuildJob(obj, target_faces, normal_test, preview_above, _shown_pose(obj), members=objs)
+
+
+def _build_members(obj):
+    """The objects a build of ``obj`` binds, in the rig's order (the owner first, the others by
+    name), checked: mesh objects, none twice, none bound by or a member of another rig."""
+    if isinstance(obj, (list, tuple)):
+        if not obj:
+            raise SkinDetachError("obj: expected a mesh object or a non-empty list of them, got an empty list")
+        for k, one in enumerate(obj):
+            if one is None or getattr(one, "type", None) != 'MESH':
+                raise SkinDetachError(f"obj[{k}]: expected a mesh object, got "
+                                      f"{'None' if one is None else repr(getattr(one, 'name', one))}")
+        objs = list(obj)
+    else:
+        owner = _owner(obj)
+        objs = [owner] + [o for o in rig_members.objects(owner)[1:] if o is not None] \
+            if stored.has_binding(owner) else [owner]
+    for one in objs:
+        skin_rig.check_mesh_object(one)
+    if len({o.as_pointer() for o in objs}) != len(objs):
+        raise SkinDetachError(f"obj: expected distinct mesh objects, got {[o.name for o in objs]} (one twice)")
+    owner = objs[0]
+    for one in objs:
+        other = rig_members.owner_of(one)
+        if other is not None and other != owner:
+            raise SkinDetachError(f"obj {one.name!r}: expected a mesh of no other rig, it is an object of the rig of "
+                                  f"{other.name!r}; Clear Skin of that rig first")
+        if one != owner and stored.has_binding(one):
+            raise SkinDetachError(f"obj {one.name!r}: expected a mesh of no other rig, it is bound itself; Clear Skin "
+                                  f"of it first (or make it the owner: first in the list)")
+    return rig_members.order(objs)
 
 
 def finish_build(job):
@@ -105,13 +147,15 @@ def finish_build(job):
 
 
 def set_parts(obj, vertex_ids, mode):
-    """Decide the loose parts of ``obj`` holding ``vertex_ids`` (k,) whatever they touch: "ATTACH"
+    """Decide the loose parts of ``obj`` (a mesh object, one of a rig of several objects too: its
+    own vertex ids) holding ``vertex_ids`` (k,) whatever they touch: "ATTACH"
     makes each ride on the nearest part of larger area (however far), "DETACH" makes each free (its
     own proxy: it deforms on its own), "RULE" gives them back to the rule (a part that touches a
     part of at least twice its area rides on it; docs/addon.md). Stored on the object; the next
     :func:`build` uses it (a bound mesh: press Rebuild, or call build again). Returns how many
     parts were named."""
-    obj = _owner(obj)
+    if obj is None or obj.type != 'MESH' or is_rig_part(obj):
+        obj = _owner(obj)  # a proxy or a preview: its mesh (an object of a rig is itself: its own ids)
     skin_rig.check_mesh_object(obj)
     stored.check_editable(obj)
     return skin_rig.set_parts(obj, vertex_ids, mode)
@@ -170,6 +214,8 @@ def _prepare_after_change(obj):
 def add_handle(obj, vertex_ids=None, on_proxy=False, group=None, mirror=None):
     """A handle empty carrying ``vertex_ids`` (k,): vertex indices of ``obj``'s mesh (or of the
     proxy with ``on_proxy=True``), or the members of vertex group ``group`` (weight above zero).
+    On a rig of several objects: combined ids (see :func:`member_ranges`) or a dict {object of
+    the rig: its own vertex ids}; a group is the union of that group in every object that has it.
     Move, rotate or animate the empty, then :func:`deform`.
 
     ``mirror`` ("X", "Y" or "Z", the mesh's local axis, as Blender's Mesh Symmetry; None: the
@@ -211,7 +257,11 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     if group is not None:
         if on_proxy:
             raise SkinDetachError("group: expected a vertex group of the mesh, not of the proxy (on_proxy=False)")
-        vertex_ids = mesh_io.group_members(obj, group)
+        vertex_ids = rig_members.group_members(obj, group)
+    elif isinstance(vertex_ids, dict):
+        if on_proxy:
+            raise SkinDetachError("vertex_ids: expected proxy vertex ids with on_proxy=True, got a dict of objects")
+        vertex_ids = rig_members.combined_ids(obj, vertex_ids)
     if on_proxy:
         if mirror:
             raise SkinDetachError("mirror: expected mesh vertices (the proxy is not symmetric); select on the mesh")
@@ -228,7 +278,7 @@ def _add(obj, vertex_ids, kind, on_proxy, group, mirror):
     if detail is None:  # proxy vertices: the median point of the proxy's
         rest, current, selected = surface.proxy_vertices, mesh_io.read_positions(binding.proxy.data), proxy_ids
     else:
-        rest, current, selected = binding.rest, mesh_io.read_positions(obj.data), detail
+        rest, current, selected = binding.rest, rig_members.read_positions(obj), detail
     on_plane = mirror if mirror and twin_detail is None else ""  # its own mirror image: on the plane
     rest_center = handle_symmetry.median_point(rest, selected, on_plane)
     now_center = (rest_center + handle_symmetry.median_point(current, selected)
@@ -325,6 +375,21 @@ def _write_shown_pose(obj):
         preview_stand_in.end_stand_in(obj)
 
 
+def members(obj):
+    """The objects of the rig ``obj`` belongs to, in the rig's order: the owner first, then the
+    others as sorted by name at build time; ``[obj]`` for a rig of one object (a deleted member: None)."""
+    return rig_members.objects(_bound(obj))
+
+
+def member_ranges(obj):
+    """{object: (first, stop)}: the combined vertex ids of each object of ``obj``'s rig are
+    ``range(first, stop)``; combined id ``first + i`` is that object's vertex ``i``."""
+    owner = _bound(obj)
+    bounds = rig_members.offsets(owner)
+    return {member: (int(bounds[k]), int(bounds[k + 1])) for k, member in enumerate(rig_members.objects(owner))
+            if member is not None}
+
+
 def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_modifiers=False, progress=None,
          stretch=None):
     """Evaluate the scene at each of ``frames`` (``"1-250"``, ``"1-10,20"`` or an iterable of
@@ -334,7 +399,10 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     stretch (the ``skin_detach_stretch`` attribute and its colours, as :func:`show_stretch`), False
     none; None (default): each frame's own when ``obj`` shows its stretch, else none.
     Returns one dict per frame (frame, milliseconds, iterations, converged, volume_change,
-    output). Idempotent; the mesh and the scene frame are left as they were. See
+    output). A rig of several objects bakes each of them: a key on each object, a baked object
+    per object and frame, or one file per object and frame (the object's name inserted before
+    the frame digits: ``out/char_####.obj`` -> ``out/char_eye_0012.obj``; see
+    :func:`bake_file_path`); ``output`` is then a list, one per object in :func:`members` order. Idempotent; the mesh and the scene frame are left as they were. See
     :func:`skin_detach_addon.blender.baking.bake`."""
     return baking.bake(_bound(obj), frames, into, path, preserve_volume, apply_modifiers, progress, stretch)
 
@@ -360,6 +428,11 @@ def handles_of(obj):
     lost), sorted by name; later names win where they share proxy vertices."""
     owner = _owner(obj)
     return handles.handles_of(owner)
+
+
+def is_rig_part(obj):
+    """Whether ``obj`` is a part of a rig (a proxy, a preview, a handle or anchor), not a mesh of it."""
+    return obj is not None and skin_rig.is_rig_part(obj)
 
 
 def is_handle(obj):
@@ -508,7 +581,8 @@ def proxy_of(obj):
 
 
 def rest_positions(obj):
-    """(n, 3) float32 rest positions the mesh was bound with, in its vertex order."""
+    """(n, 3) float32 rest positions the mesh was bound with, in its vertex order (a rig of
+    several objects: combined, in the owner's local space)."""
     return stored.rest_positions(_bound(obj)).copy()
 
 
@@ -546,9 +620,13 @@ def frame_list(frames):
     return baking.check_frames(frames)
 
 
-def bake_file_path(pattern, frame):
+def bake_file_path(pattern, frame, member=None):
     """The file :func:`bake` writes ``frame`` to for ``pattern`` (``"out/scan_####.obj"`` ->
-    ``"out/scan_0012.obj"``: the last run of ``#`` in the file name is the zero-padded frame)."""
+    ``"out/scan_0012.obj"``: the last run of ``#`` in the file name is the zero-padded frame);
+    ``member`` (an object of a rig of several, or its name): that object's file
+    (``"out/scan_eye_0012.obj"``)."""
+    if member is not None:
+        pattern = baking.member_pattern(pattern, getattr(member, "name", member))
     return baking.file_path(pattern, frame)
 
 

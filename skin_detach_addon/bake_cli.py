@@ -171,7 +171,8 @@ def run(args):
                        preserve_volume=not args.no_volume, apply_modifiers=args.apply_modifiers, progress=progress,
                        stretch=args.stretch)
     if not to_blend:
-        missing = [r["frame"] for r in records if not os.path.isfile(r["output"])]
+        missing = [r["frame"] for r in records  # a rig of several objects: one file per object
+                   if not all(os.path.isfile(f) for f in (r["output"] if isinstance(r["output"], list) else [r["output"]]))]
         if len(records) != len(frames) or missing:
             raise BakeFailed(f"--output: expected one file for each of the {len(frames)} frames, "
                              f"{len(records) - len(missing)} were written (missing frames: "
@@ -187,7 +188,13 @@ def verify(bpy, api, args):
     """Every frame of ``--frames`` (default: the scene's range) has its file: else BakeFailed."""
     scene = bpy.context.scene
     frames = api.frame_list(args.frames or f"{scene.frame_start}-{scene.frame_end}")
-    missing = [f for f in frames if not os.path.isfile(api.bake_file_path(args.output, f))]
+    try:  # a rig of several objects has one file per object and frame
+        members = api.members(find_object(bpy, api, args.object))
+    except (BakeFailed, api.SkinDetachError):
+        members = []
+    members = [None] if len(members) < 2 else members
+    missing = [f for f in frames if not all(os.path.isfile(api.bake_file_path(args.output, f, member))
+                                            for member in members)]
     if missing:
         shown = ", ".join(map(str, missing[:20])) + (" ..." if len(missing) > 20 else "")
         raise BakeFailed(f"--output: expected a file for each of the {len(frames)} frames, {len(missing)} are "

@@ -267,3 +267,24 @@ def test_specks_too_small_for_a_share_of_the_proxy_keep_their_rest_and_take_no_p
                               place=lambda result: placement(result, [motion]))
     assert np.abs(out[held] - (points[held] + [0.5, 0.0, 0.0])).max() <= 1e-12
     assert np.array_equal(out[specks[8:]], points[specks[8:]])
+
+
+def test_a_rider_over_a_surface_that_is_a_line_of_vertices_rests_exactly_and_moves_rigidly():
+    """A small cube beside the edge of a fan whose vertices near it all lie on one line (the fan's
+    other corner far away): the free vertices under each of its pieces are collinear, which leaves
+    the turn about that line free in a patch's own fit: the rest must come back and a rigid motion
+    must move the cube by exactly that motion (a fit that took any turn about the line threw the
+    cylinder of a limb 0.3 of the diagonal off at rest)."""
+    line = np.stack([np.linspace(0.0, 1.0, 41), np.zeros(41), np.zeros(41)], axis=1)
+    fan = (np.concatenate([line, [[0.5, 5.0, 0.0]]]), np.array([[i, i + 1, 41] for i in range(40)]))
+    rider = box(size=(0.02, 0.02, 0.02), cells=(1, 1, 1), offset=(0.49, -0.03, -0.01))
+    points, triangles = merge(fan, rider)
+    mine = np.arange(42, points.shape[0])
+    surface = SkinDetachedSurface.build(points, triangles, target_faces=30)
+    assert surface.stats["riders"] == 1
+    surface.attach_topology(triangles)
+    diagonal = np.linalg.norm(points.max(axis=0) - points.min(axis=0))
+    assert np.abs(surface.reconstruct(surface.proxy_vertices) - points).max() <= 1e-9 * diagonal
+    rotation = random_rotation(11)
+    moved = surface.reconstruct(surface.proxy_vertices @ rotation.T + [0.5, 0.0, -2.0])
+    assert np.abs(moved[mine] - (points[mine] @ rotation.T + [0.5, 0.0, -2.0])).max() <= 1e-6 * diagonal

@@ -17,7 +17,7 @@ import time
 
 from ..core.errors import SkinDetachError
 from . import binding as stored
-from . import mesh_io, skin_rig
+from . import mesh_io, rig_members, skin_rig
 from .deformation import Deformation
 
 SHAPE_KEYS = "SHAPE_KEYS"
@@ -126,6 +126,21 @@ def file_path(pattern, frame):
     return os.path.join(folder, name) if folder else name
 
 
+def member_pattern(pattern, name):
+    """The file name pattern of the object ``name`` of a rig of several objects: its name (characters
+    other than letters, digits, ``-``, ``_`` and ``.`` made ``_``) and ``_`` inserted before the
+    last run of ``#`` in the file name (``out/char_####.obj``, "Eye.L" -> ``out/char_Eye.L_####.obj``;
+    without ``#``, before the ``_####`` :func:`file_path` adds)."""
+    folder, base = os.path.split(pattern)
+    if "#" not in base:
+        root, ext = os.path.splitext(base)
+        base = f"{root}_####{ext}"
+    last = list(re.finditer(r"#+", base))[-1]
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(name))
+    base = f"{base[:last.start()]}{safe}_{base[last.start():]}"
+    return os.path.join(folder, base) if folder else base
+
+
 def check_output(pattern):
     """Raise unless ``pattern`` names .obj or .ply files in a folder that exists (or can be made) and is writable."""
     ext = os.path.splitext(pattern)[1].lower()
@@ -202,8 +217,9 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     if into == SHAPE_KEYS and stretch:
         raise SkinDetachError(f"stretch: expected False or None for {SHAPE_KEYS} (a shape key holds positions "
                               f"only), got True; bake into {OBJECTS} or PLY files to keep each frame's stretch")
+    members = rig_members.objects(obj)
     if stretch is None:
-        stretch = mesh_io.stretch_shown(obj.data)
+        stretch = any(mesh_io.stretch_shown(member.data) for member in members if member is not None)
     if into == FILES:
         if not path:
             raise SkinDetachError("path: expected a file name pattern such as 'out/mesh_####.obj' for FILES, got none")
@@ -212,9 +228,23 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
     if obj.name not in scene.objects:
         raise SkinDetachError(f"object {obj.name!r}: expected it in the current scene {scene.name!r}, it is not")
     deformation = Deformation(obj, preserve_volume)
+    for member in deformation.members[1:]:
+        if member.name not in scene.objects:
+            raise SkinDetachError(f"object {member.name!r}: expected it in the current scene {scene.name!r} with "
+                                  f"the rig of {obj.name!r}, it is not")
     saved_frame = (scene.frame_current, scene.frame_subframe)
     saved = deformation.snapshot()
-    writer = {SHAPE_KEYS: _ShapeKeyWriter, OBJECTS: _ObjectWriter, FILES: _FileWriter}[into](obj, path, apply_modifiers)
+    kind = {SHAPE_KEYS: _ShapeKeyWriter, OBJECTS: _ObjectWriter, FILES: _FileWriter}[into]
+    if deformation.several:
+        names = [member.name for member in deformation.members]
+        patterns = [member_pattern(path, name) if path else path for name in names]
+        if into == FILES and len({file_path(p, frames[0]) for p in patterns}) != len(patterns):
+            raise SkinDetachError(f"objects: expected names that give each object its own file, got {names} "
+                                  f"(two give the same file name)")
+        writer = _MembersWriter(obj, [kind(member, pattern, apply_modifiers)
+                                      for member, pattern in zip(deformation.members, patterns)])
+    else:
+        writer = kind(obj, path, apply_modifiers)
     records = []
     try:
         for frame in frames:
@@ -235,6 +265,26 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
         deformation.restore(saved)
         scene.frame_set(saved_frame[0], subframe=saved_frame[1])
     return records
+
+
+class _MembersWriter:
+    """Bake writer of a rig of several objects: one writer per object (:mod:`.rig_members`), each
+    given its own positions (the frame's combined ones mapped into its space) and stretch; its
+    output is the list of theirs, in the rig's order."""
+
+    def __init__(self, owner, writers):
+        self.owner, self.writers = owner, writers
+
+    def write(self, frame, detail, stretch=None):
+        parts = rig_members.split(self.owner, detail)
+        for member, part in zip(rig_members.objects(self.owner), parts):
+            mesh_io.check_positions(f"object {member.name!r} at frame {frame}", part)
+        values = rig_members.split_values(self.owner, stretch) if stretch is not None else [None] * len(parts)
+        return [writer.write(frame, part, value) for writer, part, value in zip(self.writers, parts, values)]
+
+    def undo(self):
+        for writer in self.writers:
+            writer.undo()
 
 
 class _ShapeKeyWriter:

@@ -241,24 +241,34 @@ def _flat_props(arrays, prefix=""):
             yield prefix + key, np.asarray(value, dtype=np.float64).ravel()  # no copy when already float64
 
 
-def store(obj, surface, rest, proxy, preview=None):
+def store(obj, surface, rest, proxy, preview=None, members=None, local_rest=None):
     """Write the binding of ``obj`` (replacing any; ``preview``: the preview object of
-    ``surface.preview``, or None) and return its :class:`Binding`."""
-    import bpy
+    ``surface.preview``, or None) and return its :class:`Binding`. ``members``: the rig's objects
+    (``obj`` first) when it has several, with ``local_rest`` (n, 3) float32 their own rest
+    positions concatenated (see :mod:`.rig_members`); ``rest`` is then the combined rest."""
+    from . import rig_members
     rest = np.ascontiguousarray(rest, dtype=np.float32).ravel()
+    several = members is not None and len(members) > 1
+    entries = rig_members.record_entries(obj, members) if several else None
     props = {
         "schema_version": SCHEMA_VERSION,
         "binding_id": uuid.uuid4().hex,
-        "mesh_fingerprint": mesh_io.mesh_fingerprint(obj.data),
-        "written_digest": mesh_io.positions_digest(rest.reshape(-1, 3)),
+        "mesh_fingerprint": (rig_members.fingerprint_of([e["fingerprint"] for e in entries]) if several
+                             else mesh_io.mesh_fingerprint(obj.data)),
+        "written_digest": mesh_io.positions_digest(local_rest if several else rest.reshape(-1, 3)),
         "written_matrix": _world(obj),
         "proxy": proxy,
     }
     forget(obj)
     obj[KEY] = props
     group = obj[KEY]
+    if several:
+        group[rig_members.MEMBERS] = entries
+    rig_members.tag(obj, members if several else [obj])
     arrays = _new_store(obj, group)
     arrays["rest"] = rest
+    if several:
+        arrays[rig_members.LOCAL_REST] = np.ascontiguousarray(local_rest, dtype=np.float32).ravel()
     # The arrays one at a time: each copy goes once Blender holds its own.
     entries = [_flat_props(compact_arrays(surface))]
     if preview is not None:
@@ -346,7 +356,9 @@ def _checked_record(obj):
                               f"never writes a mesh under Edit Mode)")
     if not obj.users_scene:
         raise SkinDetachError(f"object {obj.name!r}: expected it in a scene, it was unlinked from every scene")
-    fingerprint = mesh_io.mesh_fingerprint(obj.data)
+    from . import rig_members
+    rig_members.check(obj)  # the other objects of a rig of several: each named when it does not fit
+    fingerprint = rig_members.fingerprint(obj)
     if fingerprint != props.get("mesh_fingerprint"):
         raise SkinDetachError(f"mesh {obj.data.name!r}: expected the topology it was bound with, the mesh was "
                               f"edited after binding (now {len(obj.data.vertices)} vertices, or its faces changed); "
@@ -429,7 +441,8 @@ def _early_triangles(obj):
     """The triangles of a mesh of triangles only whose binding is to be made, read before its
     record is checked (the check then finds the fingerprint made from the same read), else None: a
     mesh of quads or ngons is split as its rest shape splits, once the rest is read (:class:`Opening`)."""
-    if _needs_opening(obj) and mesh_io.triangles_only(obj.data):
+    from . import rig_members
+    if _needs_opening(obj) and not rig_members.is_multi(obj) and mesh_io.triangles_only(obj.data):
         return mesh_io.read_triangles(obj.data)
     return None
 
@@ -465,10 +478,14 @@ class Opening:
                                   f"points at, it was deleted or damaged; press Rebuild")
         self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
                         if key not in ("proxy", "preview", STORE)}
-        self.rest = np.array(_checked_rest(obj, stored_arrays, len(obj.data.vertices)))  # its own, not Blender's
+        from . import rig_members
+        self.rest = np.array(_checked_rest(obj, stored_arrays, rig_members.vertex_count(obj)))  # its own, not Blender's
         # Quads and ngons split as the rest shape splits (the skin was bound over those): a posed
         # quad mesh's own split differs where a quad folded across its first diagonal.
-        self._triangles = mesh_io.read_triangles(obj.data, self.rest) if triangles is None else triangles
+        if triangles is None:
+            parts = rig_members.local_rest(obj) if rig_members.is_multi(obj) else [self.rest]
+            triangles = rig_members.read_triangles(obj, parts)
+        self._triangles = triangles
         self.fraction, self.stage = 0.0, "reading"
         self._future = None
 
@@ -630,7 +647,10 @@ def proxy_of(obj):
 def check_unedited(obj):
     """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
     if not holds_written(obj):
-        raise SkinDetachError(f"mesh {obj.data.name!r}: expected the positions Skin Detach last wrote, they were "
+        from . import rig_members
+        what = f"mesh {obj.data.name!r}" if not rig_members.is_multi(obj) else \
+            f"meshes of {', '.join(repr(name) for name in rig_members.names(obj))}"
+        raise SkinDetachError(f"{what}: expected the positions Skin Detach last wrote, they were "
                               f"edited since (sculpt or Edit Mode?); press Rebuild to bind the new shape, or Reset "
                               f"to return to the bound rest shape")
 
@@ -672,7 +692,8 @@ def set_written_state(obj, state):
 
 def holds_written(obj):
     """The mesh holds exactly what Skin Detach last wrote (or the rest shape it was bound with)."""
-    return mesh_io.positions_digest(mesh_io.read_positions(obj.data)) == _stored(obj).get("written_digest")
+    from . import rig_members
+    return rig_members.written_digest(obj) == _stored(obj).get("written_digest")
 
 
 def moved_since_written(obj):
@@ -692,7 +713,8 @@ def rest_positions(obj):
     if arrays is None:
         raise SkinDetachError(f"binding of {obj.name!r}: expected its arrays in the text datablock its record "
                               f"points at, it was deleted or damaged; press Rebuild")
-    return _checked_rest(obj, arrays, len(obj.data.vertices))
+    from . import rig_members
+    return _checked_rest(obj, arrays, rig_members.vertex_count(obj))
 
 
 def binding_id(obj):
@@ -714,6 +736,8 @@ def forget(obj):
         side = None if record is None else record.get(STORE)
         if record is not None:
             _CACHE.pop(record.get("binding_id"), None)
+        from . import rig_members
+        rig_members.untag(obj)
         del obj[KEY]
         _remove_unused(side)
 

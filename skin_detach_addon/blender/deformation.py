@@ -15,7 +15,7 @@ from ..core import threads
 from ..core.errors import SkinDetachError
 from ..core.proxy_solve.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
 from . import binding as stored
-from . import handle_symmetry, handles, mesh_io
+from . import handle_symmetry, handles, mesh_io, rig_members
 from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
 
 
@@ -49,7 +49,7 @@ class StepReport:
 @dataclass
 class Snapshot:
     """What a step may change, saved bit for bit: the mesh (None when the session never writes it
-    before it ends) and proxy positions (and shape keys, see :func:`mesh_io.snapshot`), every
+    before it ends; a list, one per object, for a rig of several, see :mod:`.rig_members`) and proxy positions (and shape keys, see :func:`mesh_io.snapshot`), every
     handle's basis matrix by name, and the written state (see :func:`binding.written_state`)."""
 
     mesh: tuple
@@ -75,6 +75,9 @@ class Deformation:
         if len(self.proxy.data.vertices) != m:
             raise SkinDetachError(f"proxy {self.proxy.name!r}: expected {m} vertices, got "
                                   f"{len(self.proxy.data.vertices)} (its mesh was edited); press Rebuild")
+        #: The rig's objects, the owner first (:mod:`.rig_members`; ``[obj]`` for one object).
+        self.members = rig_members.objects(obj)
+        self.several = len(self.members) > 1
         if require_unedited:
             stored.check_unedited(obj)
 
@@ -108,7 +111,8 @@ class Deformation:
     def _constraints(self, empties):
         """(constrained proxy ids (c,), their targets (c, 3), the :class:`Layout`, the held detail's
         (4, 4) motions, one per pair of the layout) of the handle and anchor ``empties``."""
-        ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices)
+        ids, targets, groups, detail = handles.constraints(self.obj, empties, self.binding.surface.proxy_vertices,
+                                                           self.binding.surface.n_detail)
         return ids, targets, self.binding.layout(groups, [(label, ids_) for label, ids_, _ in detail]), \
             [motion for _, _, motion in detail]
 
@@ -243,11 +247,14 @@ class Deformation:
                 raise SkinDetachError(f"object {target.name!r}: expected Object Mode, its mesh is in Edit Mode "
                                       f"(nothing was written)")
 
-    def _write(self, detail, proxy_positions, mark=True):
+    def _write(self, detail, proxy_positions, mark=True, parts=None):
         """Write the mesh and the proxy, or neither: every check comes first. The mesh is shown
         again if a preview stood in for it. A preview drag's guard gets the mesh's snapshot first
-        (see :class:`.mesh_guard.MeshGuard`)."""
+        (see :class:`.mesh_guard.MeshGuard`). A rig of several objects writes every one of them
+        (``detail`` mapped into each one's space, or its own ``parts`` given), all or none."""
         self._check_writable(proxy_positions, (self.proxy, self.obj), (detail,))
+        if self.several:
+            return self._write_members(detail, proxy_positions, mark, parts)
         self.binding.mesh_guard.before_write(self.obj.data)
         shown = mark and mesh_io.stretch_shown(self.obj.data)
         # The stretch, its colours and the written digest made on the pool's threads while the
@@ -261,6 +268,22 @@ class Deformation:
             stored.mark_written(self.obj, detail, digesting.result())
         self.show_preview(False)
 
+    def _write_members(self, detail, proxy_positions, mark, parts):
+        """:meth:`_write` of a rig of several objects: every member checked (there, in Object Mode,
+        where it was bound, finite) before any is written."""
+        parts = rig_members.split(self.obj, detail) if parts is None else parts
+        rig_members.check_writable(self.obj, parts)
+        rig_members.write_parts(self.obj, parts)
+        mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
+        if mark:
+            stretch = self.binding.stretch(proxy_positions) if any(
+                mesh_io.stretch_shown(obj.data) for obj in self.members) else None
+            for obj, values in zip(self.members, rig_members.split_values(self.obj, stretch) if stretch is not None
+                                   else [None] * len(self.members)):
+                mesh_io.write_stretch(obj.data, values)
+            stored.mark_written(self.obj, None, rig_members.digest_of_parts(parts))
+        self.show_preview(False)
+
     def _painted_stretch(self, proxy_positions):
         """(stretch (n,), its colours (4 n,)) of the mesh with the proxy at ``proxy_positions``
         (m, 3): numpy only, on a pool thread (:meth:`_write`)."""
@@ -271,7 +294,8 @@ class Deformation:
         """A :class:`Snapshot` of everything :meth:`step` and :meth:`reset` may change; without
         the mesh (``mesh=False``: None in its place) for a session that only writes the preview
         until it ends, so its cancel need not write millions of vertices back."""
-        return Snapshot(mesh_io.snapshot(self.obj.data) if mesh else None, mesh_io.snapshot(self.proxy.data),
+        kept = (rig_members.snapshot(self.obj) if self.several else mesh_io.snapshot(self.obj.data)) if mesh else None
+        return Snapshot(kept, mesh_io.snapshot(self.proxy.data),
                         {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_state(self.obj))
 
     def restore(self, saved):
@@ -280,7 +304,9 @@ class Deformation:
         for empty in self.handles():
             if empty.name in saved.matrices:
                 empty.matrix_basis = saved.matrices[empty.name]
-        if saved.mesh is not None:
+        if saved.mesh is not None and self.several:
+            rig_members.restore(self.obj, saved.mesh)
+        elif saved.mesh is not None:
             mesh_io.restore(self.obj.data, saved.mesh)
         mesh_io.restore(self.proxy.data, saved.proxy)
         stored.set_written_state(self.obj, saved.written)
@@ -295,7 +321,8 @@ class Deformation:
         empties = self.handles()
         for empty in empties:  # all checked before anything moves
             handles.rest_local_of(empty)
-        self._write(self.binding.rest, self.binding.surface.proxy_vertices)
+        parts = rig_members.local_rest(self.obj) if self.several else None  # each member's own, bit for bit
+        self._write(self.binding.rest, self.binding.surface.proxy_vertices, parts=parts)
         handles.place_at_rest(self.obj, empties)
         self.binding.solves.forget_warm_starts()
 
@@ -313,7 +340,7 @@ class Deformation:
                                   f"Rebuild to bind it as it is, or undo the Apply")
 
     def _rest_under_another_map(self):
-        current = mesh_io.read_positions(self.obj.data).astype(np.float64)
+        current = rig_members.read_positions(self.obj).astype(np.float64)
         rest = self.binding.rest.astype(np.float64)
         if current.shape[0] < 4:
             return False

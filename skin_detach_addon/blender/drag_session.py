@@ -15,7 +15,7 @@ from mathutils import Matrix, Vector
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from . import binding as stored
-from . import handles, mesh_io
+from . import handles, rig_members
 from .deformation import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
@@ -326,6 +326,6 @@ def before_save():
     for session in list(_RUNNING):
         try:
             if not session.previewing and session.last is not None:
-                stored.mark_written(session.obj, mesh_io.read_positions(session.obj.data))
+                stored.mark_written(session.obj, rig_members.read_local(session.obj))
         except ReferenceError:  # its objects went with a file loaded during the drag: it is over
             _RUNNING.discard(session)

@@ -106,7 +106,8 @@ def symmetry_axis(obj, empties, own_mirror_image):
     the detail is never averaged with a side the proxy does not mirror; a rig symmetric across
     an axis nobody asked for counts as symmetric only while it moves symmetrically (see
     :func:`moves_symmetrically`)."""
-    n = len(obj.data.vertices)
+    from . import rig_members
+    n = rig_members.vertex_count(obj)
     found = []
     for axis in AXES if empties else ():
         if all(_twinned(e, axis) or self_symmetric(e, axis, own_mirror_image, n) for e in empties):

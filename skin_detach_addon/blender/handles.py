@@ -422,14 +422,15 @@ def local_motions(obj, empties):
                               f"handle {singular[0]!r}, got a singular one") from None
 
 
-def constraints(obj, empties, rest_proxy):
+def constraints(obj, empties, rest_proxy, n=None):
     """Constrained proxy ids (c,) sorted, their targets (c, 3) in local space, the rigid group
     of every proxy vertex (m,) (0: anchors, 1, 2, ...: each handle, -1: free), and the held
     detail: (group label, detail ids (h,), (4, 4) local motion) per handle or anchor made from
     detail vertices (an anchor's motion the identity), from the handle and anchor ``empties`` of
     ``obj`` (:func:`handles_of`, oldest first) in that order: where they share proxy or detail
     vertices the newer wins (:func:`.core.detached_surface.held_detail.owned_pairs`)."""
-    m, n = rest_proxy.shape[0], len(obj.data.vertices)
+    # n: the detail's vertex count (default: obj's; a rig of several objects: all of theirs)
+    m, n = rest_proxy.shape[0], len(obj.data.vertices) if n is None else n
     targets = np.full((m, 3), np.nan)
     held = np.zeros(m, dtype=bool)
     groups = np.full(m, -1, dtype=np.int64)

@@ -15,7 +15,7 @@ from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal, component_labels
 from ..core.validation import MIN_PREVIEW_VERTICES, as_vertex_ids
 from . import binding as stored
-from . import handle_symmetry, handles, mesh_io, preview_stand_in
+from . import handle_symmetry, handles, mesh_io, preview_stand_in, rig_members
 
 #: The collection of each scene that holds its rigs (proxies, previews, handles). Not named after
 #: the add-on: F3 "skin detach" would list "Add > Collection Instance > Skin Detach" first (a
@@ -55,7 +55,8 @@ def check_mesh_object(obj):
                               f"{len(obj.data.vertices)} vertices and {len(obj.data.polygons)} faces")
 
 
-def _is_rig_part(obj):
+def is_rig_part(obj):
+    """Whether ``obj`` is a proxy, a preview or a handle (an anchor too) of a rig."""
     return handles.is_handle(obj) or PROXY_TAG in obj or PREVIEW_TAG in obj
 
 
@@ -75,17 +76,18 @@ def _deleted(obj):
 
 
 def mesh_of(obj):
-    """The detail mesh object that ``obj`` stands for: its proxy's or handle's mesh, else ``obj``
-    itself; None for nothing and for a part of a rig whose mesh was deleted (see :func:`orphan_owner`)."""
-    if obj is None or not _is_rig_part(obj):
-        return obj
+    """The detail mesh object that ``obj`` stands for: its proxy's or handle's mesh, the owner of
+    the rig of several objects it is a member of (:mod:`.rig_members`), else ``obj`` itself; None
+    for nothing and for a part of a rig whose mesh was deleted (see :func:`orphan_owner`)."""
+    if obj is None or not is_rig_part(obj):
+        return rig_members.owner_of(obj) or obj
     owner = _recorded_owner(obj)
     return None if _deleted(owner) else owner
 
 
 def orphan_owner(obj):
     """The deleted mesh object whose rig ``obj`` (a proxy, preview or handle) is left of, or None."""
-    if obj is None or not _is_rig_part(obj):
+    if obj is None or not is_rig_part(obj):
         return None
     owner = _recorded_owner(obj)
     return owner if owner is not None and _deleted(owner) else None
@@ -141,24 +143,57 @@ class BuildJob:
     where it stands in for the mesh, see ``api.start_build``); :meth:`finish` writes them into the
     mesh first."""
 
-    def __init__(self, obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, positions=None):
+    def __init__(self, obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE, positions=None,
+                 members=None):
         check_mesh_object(obj)
+        #: The rig's objects (``obj`` first, see :mod:`.rig_members`): ``[obj]`` for one object.
+        self.members = [obj] if members is None or len(members) < 2 else list(members)
+        several = len(self.members) > 1
+        if several and positions is not None:
+            raise SkinDetachError(f"object {obj.name!r}: expected its mesh shown, its preview stands in for it; "
+                                  f"press Apply first, then Build the several objects")
+        for other in self.members[1:]:
+            check_mesh_object(other)
+            if other.mode == 'EDIT' or other.data.is_editmode:
+                raise SkinDetachError(f"object {other.name!r}: expected Object Mode, its mesh is in Edit Mode")
         mesh = obj.data
         self.name, self._pointer = obj.name, obj.as_pointer()
-        held = mesh_io.read_positions(mesh)
+        self._pointers = [o.as_pointer() for o in self.members]
+        self._names = [o.name for o in self.members]
+        locals_ = [mesh_io.read_positions(o.data) for o in self.members]
+        held = locals_[0] if not several else np.concatenate(locals_)
+        self.local_rest = held if several else None
         self.shown_pose = positions is not None
-        self.positions = held if positions is None else np.ascontiguousarray(positions, dtype=np.float32)
+        if several:
+            #: The members' world matrices relative to the owner's, as read (what is stored).
+            relative = [np.linalg.solve(np.array(obj.matrix_world, dtype=np.float64),
+                                        np.array(o.matrix_world, dtype=np.float64)) for o in self.members]
+            if not all(np.isfinite(m).all() for m in relative):
+                raise SkinDetachError(f"objects: expected finite world matrices of {', '.join(self._names)}, got NaN "
+                                      f"or inf")
+            self._relative = relative
+            combined = [locals_[0]] + [(p.astype(np.float64) @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+                                       for p, m in zip(locals_[1:], relative[1:])]
+            self.positions = np.concatenate(combined)
+        else:
+            self.positions = held if positions is None else np.ascontiguousarray(positions, dtype=np.float32)
         mesh_io.check_positions(f"mesh {mesh.name!r}", self.positions)
         # Quads and ngons split as the bound shape splits (what reopening the file splits again);
         # first: the fingerprint is made from the same read.
-        self.triangles = mesh_io.read_triangles(mesh, self.positions if self.shown_pose else None)
-        self._read = (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(held))
+        if several:
+            offsets = np.cumsum([0] + [p.shape[0] for p in locals_])
+            self.triangles = np.concatenate([mesh_io.read_triangles(o.data) + np.int32(offsets[k])
+                                             for k, o in enumerate(self.members)]).astype(np.int32)
+        else:
+            self.triangles = mesh_io.read_triangles(mesh, self.positions if self.shown_pose else None)
+        self._read = self._state(self.members, held)
         self.target_faces, self.normal_test = target_faces, normal_test
-        self.attach, self.detach = part_overrides(obj)
+        self.attach, self.detach = _combined_overrides(self.members)
         self.preview_vertices = None
         n = self.positions.shape[0]
-        # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets none.
-        if preview_above is not None and n > preview_above and n // 8 >= MIN_PREVIEW_VERTICES:
+        # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets
+        # none; a rig of several objects gets none (the preview stands in for one mesh).
+        if not several and preview_above is not None and n > preview_above and n // 8 >= MIN_PREVIEW_VERTICES:
             self.preview_vertices = min(PREVIEW_VERTICES, n // 8)
         #: How far the core's build got (0 to 1) and the name of its current stage.
         self.fraction, self.stage = 0.0, "waiting"
@@ -168,6 +203,13 @@ class BuildJob:
         self._cancel = threading.Event()
         self._thread = None
         self._progress = None
+
+    @staticmethod
+    def _state(members, held):
+        """What the build read of ``members``: their fingerprints, world matrices, positions' digest."""
+        return ([mesh_io.mesh_fingerprint(o.data) for o in members],
+                [tuple(np.array(o.matrix_world, dtype=np.float64).ravel()) for o in members] if len(members) > 1
+                else None, mesh_io.positions_digest(held))
 
     def cancel(self):
         """Stop at the core's next stage (:meth:`run` then raises :class:`BuildCancelled`); a
@@ -230,14 +272,25 @@ class BuildJob:
         if obj is None or obj.as_pointer() != self._pointer:
             raise SkinDetachError(f"object {self.name!r}: expected the mesh object being bound, it was deleted or "
                                   f"renamed during the build (nothing was written); press Build again")
-        check_mesh_object(obj)
-        if obj.mode == 'EDIT' or obj.data.is_editmode:
-            raise SkinDetachError(f"object {obj.name!r}: expected Object Mode to write the binding, it is in Edit "
-                                  f"Mode (nothing was written); leave Edit Mode and press Build again")
+        members = [obj]
+        for name, pointer in zip(self._names[1:], self._pointers[1:]):
+            other = next((o for o in bpy.data.objects if o.as_pointer() == pointer), None)
+            if other is None or not other.users_scene:
+                raise SkinDetachError(f"object {name!r}: expected the mesh object being bound, it was deleted during "
+                                      f"the build (nothing was written); press Build again")
+            members.append(other)
+        for member in members:
+            check_mesh_object(member)
+            if member.mode == 'EDIT' or member.data.is_editmode:
+                raise SkinDetachError(f"object {member.name!r}: expected Object Mode to write the binding, it is in "
+                                      f"Edit Mode (nothing was written); leave Edit Mode and press Build again")
         mesh = obj.data
-        if (mesh_io.mesh_fingerprint(mesh), mesh_io.positions_digest(mesh_io.read_positions(mesh))) != self._read:
-            raise SkinDetachError(f"mesh {mesh.name!r}: expected the mesh the build read, it was changed during the "
+        held = [mesh_io.read_positions(o.data) for o in members]
+        if self._state(members, held[0] if len(held) == 1 else np.concatenate(held)) != self._read:
+            raise SkinDetachError(f"mesh {mesh.name!r}: expected the mesh{'es' if len(held) > 1 else ''} the build "
+                                  f"read, {'they were' if len(held) > 1 else 'it was'} changed or moved during the "
                                   f"build (nothing was written); press Build again")
+        self.members = members
         return obj
 
     def finish(self):
@@ -255,7 +308,7 @@ class BuildJob:
         if self.shown_pose:  # the pose the preview showed becomes the mesh's, and the mesh is shown again
             mesh_io.write_positions(obj.data, positions, checked=True)
             preview_stand_in.end_stand_in(obj)
-        return _write_build(obj, surface, positions)
+        return _write_build(obj, surface, positions, self.members, self.local_rest)
 
 
 #: The object's custom property holding the artist's part overrides: {"attach": (k,) int32,
@@ -280,6 +333,19 @@ def part_overrides(obj):
     return tuple(out)
 
 
+def _combined_overrides(members):
+    """(attach, detach) of a rig's ``members`` (objects in the rig's order): each object's own
+    overrides (:func:`part_overrides`) at its combined vertex ids, None where there are none."""
+    out = [[], []]
+    offset = 0
+    for member in members:
+        for k, ids in enumerate(part_overrides(member)):
+            if ids is not None:
+                out[k].append(ids + offset)
+        offset += len(member.data.vertices)
+    return tuple(np.concatenate(ids) if ids else None for ids in out)
+
+
 def set_parts(obj, vertex_ids, mode):
     """Make the loose parts of ``obj`` holding ``vertex_ids`` (k,) riders ("ATTACH"), free ("DETACH")
     or decided by the rule again ("RULE"); read by the next Build. Returns how many parts that named."""
@@ -301,23 +367,29 @@ def set_parts(obj, vertex_ids, mode):
     return int(named.size)
 
 
-def _write_build(obj, surface, positions):
+def _write_build(obj, surface, positions, members=None, local_rest=None):
     """Replace ``obj``'s binding by the core ``surface`` of its (n, 3) ``positions`` (see :func:`build`)."""
-    mesh = obj.data
     old = []  # (empty, its detail ids or None, its mirror axis): read before anything changes
+    remap = _id_remap(obj, members or [obj])
     for empty in handles.handles_of(obj):
         try:
-            old.append((empty, handles.detail_ids_of(empty, surface.n_detail), handle_symmetry.mirror_of(empty)))
+            if remap is None:
+                ids = handles.detail_ids_of(empty, surface.n_detail)
+            else:  # a rig of several objects: each id follows its object's vertex to its new place
+                ids = remap(handles.detail_ids_of(empty))
+                _store_detail_ids(empty, ids)
+            old.append((empty, ids, handle_symmetry.mirror_of(empty)))
         except SkinDetachError:
             old.append((empty, None, ""))  # damaged: removed below
     _remove_proxy(obj)
     proxy = _make_proxy(obj, surface)
     preview = None if surface.preview is None else _make_preview(obj, surface.preview)
-    stored.store(obj, surface, positions, proxy, preview)
+    stored.store(obj, surface, positions, proxy, preview, members, local_rest)
     # The pose bound is the new rest: a stretch shown is 0 everywhere now (an earlier version's
     # attribute, not shown, goes: nothing is added to a mesh until its stretch is shown).
-    shown = mesh_io.stretch_shown(mesh)
-    mesh_io.write_stretch(mesh, np.zeros(positions.shape[0], dtype=np.float32) if shown else None)
+    for member in members or [obj]:
+        shown = mesh_io.stretch_shown(member.data)
+        mesh_io.write_stretch(member.data, np.zeros(len(member.data.vertices), dtype=np.float32) if shown else None)
     kept = removed = 0
     centers = {}
     for empty, detail, axis in old:
@@ -337,7 +409,41 @@ def _write_build(obj, surface, positions):
     handles.place_at_rest(obj, handles.handles_of(obj))  # children of other handles: after them
     stats = dict(surface.stats)
     stats["handles_kept"], stats["handles_removed"] = kept, removed
+    stats["objects"] = len(members or [obj])
     return stats
+
+
+def _id_remap(obj, members):
+    """For a rebuild where the rig's objects change (several before or after): a function mapping
+    the handles' old combined ids to new ones, each id kept with its object's vertex (ids of an
+    object no longer in the rig, or whose vertex count changed, dropped); None when ``obj`` is a
+    single object before and after (ids stay as they are)."""
+    if not stored.has_binding(obj) or (not rig_members.is_multi(obj) and len(members) == 1):
+        return None
+    before, old_bounds = rig_members.objects(obj), rig_members.offsets(obj)
+    old_counts = np.diff(old_bounds)
+    new_bounds = np.concatenate([[0], np.cumsum([len(o.data.vertices) for o in members])])
+
+    def remap(ids):
+        out = []
+        for k, member in enumerate(before):
+            if member is None or member not in members:
+                continue
+            j = members.index(member)
+            if new_bounds[j + 1] - new_bounds[j] != old_counts[k]:
+                continue
+            inside = ids[(ids >= old_bounds[k]) & (ids < old_bounds[k + 1])]
+            out.append(inside - old_bounds[k] + new_bounds[j])
+        return np.sort(np.concatenate(out)) if out else np.zeros(0, dtype=np.int64)
+    return remap
+
+
+def _store_detail_ids(empty, ids):
+    """Replace the detail ids a handle stores (see :mod:`.handles`)."""
+    props = empty[handles.TAG]
+    if "detail_ids" in props:
+        del props["detail_ids"]  # assigning over an ID-property array keeps its old length
+    props["detail_ids"] = np.asarray(ids, dtype=np.int32)
 
 
 def _new_mesh_object(name, points, faces, owner, tag):
@@ -449,10 +555,19 @@ def selection(context):
     obj = mesh_of(active)
     if obj is None or not stored.has_binding(obj):
         raise SkinDetachError(f"object: expected a bound mesh or its proxy, got {_name(active)}; press Build first")
-    if active.mode == 'EDIT':
+    members = rig_members.objects(obj)
+    editing = [o for o in members if o is not None and o.mode == 'EDIT']
+    if active.mode == 'EDIT' or editing:  # every object in Edit Mode leaves it: its selection is then current
         bpy.ops.object.mode_set(mode='OBJECT')
     if obj.mode == 'EDIT':
         raise SkinDetachError(f"object {obj.name!r}: expected Object Mode, it is in Edit Mode")
+    if len(members) > 1 and PROXY_TAG not in active:  # several objects: every member's selection, combined ids
+        picked = rig_members.selected(obj, editing or None)
+        if picked.size == 0:
+            where = ", ".join(repr(o.name) for o in (editing or members) if o is not None)
+            raise SkinDetachError(f"selection: expected selected vertices on {where}, got none "
+                                  f"(select some in Edit Mode)")
+        return obj, picked, False
     if active.type != 'MESH':  # a handle is active: take the selection of the mesh itself
         active = obj
     selected = np.zeros(len(active.data.vertices), dtype=bool)
@@ -472,10 +587,30 @@ def current_stretch(obj):
     return binding.stretch(mesh_io.read_positions(binding.proxy.data))
 
 
+def _members_in_object_mode(obj):
+    members = rig_members.objects(obj)
+    for member in members:
+        stored.check_editable(member)
+        if member.mode == 'EDIT' or member.data.is_editmode:
+            raise SkinDetachError(f"object {member.name!r}: expected Object Mode, its mesh is in Edit Mode")
+    return members
+
+
 def show_stretch(obj, show=True):
     """Show the stretch of the bound mesh ``obj`` (Object Mode) in its attributes (see
     :func:`.mesh_io.show_stretch`; again: painted anew), or with ``show=False`` remove them and give
     the artist's active and render colors back (:func:`.mesh_io.hide_stretch`)."""
+    if rig_members.is_multi(obj):  # every object of the rig, its own slice
+        if show:
+            values = rig_members.split_values(obj, current_stretch(obj))
+        members = _members_in_object_mode(obj)
+        for k, member in enumerate(members):
+            if show:
+                mesh_io.show_stretch(member.data, values[k])
+            else:
+                mesh_io.hide_stretch(member.data)
+            member.data.update()
+        return
     if show:
         mesh_io.show_stretch(obj.data, current_stretch(obj))
     else:
@@ -488,8 +623,11 @@ def show_stretch(obj, show=True):
 
 def clear(obj):
     """Remove the proxy, every handle and the stored binding of ``obj``, and what Show Stretch
-    added to its mesh (the artist's active color back); the mesh keeps its shape."""
-    mesh_io.hide_stretch(obj.data)
+    added to its mesh (the artist's active color back); the mesh keeps its shape. A rig of several
+    objects goes whole: every member's stretch map and mark too (:mod:`.rig_members`)."""
+    for member in rig_members.objects(obj):
+        if member is not None:
+            mesh_io.hide_stretch(member.data)
     proxy = stored.proxy_of(obj)
     collections = set(proxy.users_collection) if proxy is not None else set()
     for empty in handles.handles_of(obj):

@@ -82,7 +82,8 @@ def build_report(stats):
     dropped = f", {stats['handles_removed']} proxy-made handles removed" if stats["handles_removed"] else ""
     preview = f"; preview of {stats['preview_vertices']:,} vertices" if stats.get("preview_vertices") else ""
     parts = f"; {parts_text(stats)}" if stats.get("parts", 1) > 1 else ""
-    return (f"Skin Detach: {stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
+    objects = f"{stats['objects']} objects, " if stats.get("objects", 1) > 1 else ""
+    return (f"Skin Detach: {objects}{stats['detail_vertices']:,} vertices bound to a proxy of {stats['proxy_faces']:,} faces "
             f"in {stats['seconds']['total']:.2f} s (case 1/2/3: {stats['case1']:,}/{stats['case2']:,}/"
             f"{stats['case3']:,}){parts}{preview}{kept}{dropped}")
 
@@ -119,8 +120,14 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
         return obj is not None and obj.type == 'MESH' and obj.name not in BUILDS
 
     def _settings(self, context):
-        """The mesh to build, Object Mode left, the unset properties given the panel's values."""
+        """The mesh to build (with several meshes selected, the list of them: the active one
+        first, the rig's owner), Object Mode left, the unset properties given the panel's values."""
         obj = api.mesh_of(context.active_object)
+        # Other selected meshes that are no part of a rig (not a proxy, preview or this rig's object).
+        others = [o for o in (getattr(context, "selected_objects", None) or ())
+                  if o.type == 'MESH' and o != obj and api.mesh_of(o) == o]
+        if others and obj is not None:  # several meshes selected: one rig of all of them (and of the rig's own)
+            obj = (api.members(obj) if api.is_bound(obj) else [obj]) + others
         leave_edit_mode(context)
         settings = context.scene.skin_detach
         for name in ("target_faces", "normal_test"):  # unset: the panel's value (then shown in Redo)
@@ -507,7 +514,11 @@ class SKIN_DETACH_OT_set_parts(_Operator, bpy.types.Operator):
         return obj is not None and obj.type == 'MESH' and obj.name not in BUILDS
 
     def run(self, context):
-        obj = api.mesh_of(context.active_object)
+        active = context.active_object
+        # The active mesh itself (an object of a rig of several objects: its own selection), or
+        # the mesh a proxy or handle stands for.
+        obj = active if active is not None and active.type == 'MESH' and not api.is_rig_part(active) \
+            else api.mesh_of(active)
         leave_edit_mode(context)
         selected = np.zeros(len(obj.data.vertices), dtype=bool)
         obj.data.vertices.foreach_get("select", selected)

@@ -140,6 +140,12 @@ class VIEW3D_PT_skin_detach(bpy.types.Panel):
         stats = figures["build"]
         box = layout.box()
         box.label(text="Figures", icon='INFO')
+        members = api.members(obj)
+        if len(members) > 1:  # a rig of several objects: how many, which (the owner first)
+            box.label(text=f"Objects: {len(members)}", icon='OUTLINER_OB_MESH')
+            for member in members:
+                box.label(text=f"  {member.name if member is not None else '(deleted)'}"
+                               f"{' (owner)' if member is obj else ''}")
         box.label(text=f"Detail: {stats.get('detail_vertices', 0):,} vertices")
         box.label(text=f"Proxy: {stats.get('proxy_vertices', 0):,} vertices, {stats.get('proxy_faces', 0):,} faces")
         if stats.get("parts", 1) > 1:

@@ -58,7 +58,10 @@ def test_the_panels_build_and_detach_decide_the_eye(ui):
     rigs.select_vertices(obj, eye[:1])
     rigs.activate(ui, obj)
     rigs.undo_push(ui, "Select")
-    yield from ui.click_button('bpy.ops.skin_detach.set_parts(mode="DETACH")', wait=2.0)
+    # The Parts row's middle button (Attach, Detach, By Rule side by side).
+    yield from ui.find_button("bpy.ops.skin_detach.set_parts(mode=", columns=(0.5,))
+    assert ui.found is not None, "no Detach button in the panel's Parts row"
+    yield from ui.click(*ui.found, wait=2.0)
     yield from ui.reports()
     figures = sd.figures(obj)["build"]
     assert (figures.get("riders"), figures.get("parts_detached")) == (0, 1), (figures, ui.last_reports[-1:])

@@ -312,7 +312,9 @@ class RigidRiders:
 
     Minimised, per piece: sum over its patch of |R p + t - p'|^2 with R a rotation (det +1), p the
     patch at rest and p' as rebuilt: t = mean(p') - R mean(p) and R from the SVD of the 3 x 3
-    covariance (Kabsch), in closed form (no iteration). A vertex's weights on the pieces of its
+    covariance (Kabsch), in closed form (no iteration); a patch that alone leaves R free (points on
+    a line) takes it from a thousandth of the rider's own vertices as the skin put them
+    (:meth:`_steady`). A vertex's weights on the pieces of its
     rider whose centres lie within 2 PIECE D of it (at most :data:`BLEND` of them) are
     (1 - (d / 2 PIECE D)^2)^2, summing to one: a rigid motion of the surface moves every rider by
     exactly that motion."""
@@ -350,9 +352,16 @@ class RigidRiders:
         self._patch_count = np.diff(self._bounds) * self._under_index.shape[1]
         self._patch_centre = np.add.reduceat(patch.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
         self._patch_local = patch - np.repeat(self._patch_centre, np.diff(self._bounds), axis=0)[:, None, :]
+        self._patch_size = np.add.reduceat(np.einsum("rki,rki->r", self._patch_local, self._patch_local),
+                                           self._bounds[:-1])
+        own_centre = np.add.reduceat(self.points, self.starts[:-1], axis=0) / self.count[:, None]
+        self._own_local = self.points - own_centre[self._rider]
+        self._own_size = np.maximum(np.add.reduceat(np.einsum("ri,ri->r", self._own_local, self._own_local),
+                                                    self.starts[:-1]), 1e-300)
         # Each vertex's pieces: the nearest of its own rider (the rider's id as a far fourth axis).
         centres = np.add.reduceat(self.points[order], self._bounds[:-1], axis=0) / np.diff(self._bounds)[:, None]
         piece_rider = self._rider[order][self._bounds[:-1]]
+        self._piece_rider = piece_rider
         far = 1e3 * (float(np.abs(self.points).max()) + size)
         k = min(BLEND, p)
         distance, near = cKDTree(np.column_stack([centres, piece_rider * far])).query(
@@ -361,6 +370,20 @@ class RigidRiders:
         weight = np.clip(1.0 - (distance / (2.0 * size)) ** 2, 0.0, None) ** 2
         weight[np.arange(near.shape[0]), 0] = np.maximum(weight[:, 0], 1e-12)  # its own piece, at least
         self._near, self._weight = near, weight / weight.sum(axis=1, keepdims=True)
+
+    def _steady(self, out):
+        """(p, 3, 3) what makes each piece's fit unique where its patch alone does not (free
+        vertices on a line: any turn about it fits them): a thousandth (of the patch's size) of the
+        covariance of its rider's own vertices, rest against where the skin put them in ``out``
+        (the skin follows the proxy's faces, whose frames turn; a rigid motion gives the same
+        rotation there), and a 1e-9 share of the identity where even that is flat."""
+        skin = np.asarray(out[self.ids], dtype=np.float64)
+        centre = np.add.reduceat(skin, self.starts[:-1], axis=0) / self.count[:, None]
+        own = np.add.reduceat(self._own_local[:, :, None] * (skin - centre[self._rider])[:, None, :],
+                              self.starts[:-1], axis=0)
+        rider = self._piece_rider
+        nudge = (1e-3 * self._patch_size / self._own_size[rider])[:, None, None] * own[rider]
+        return nudge + (1e-9 * self._patch_size + 1e-300)[:, None, None] * np.eye(3)
 
     def place(self, out, keep=None):
         """Move each rider of ``out`` (n, 3) by its pieces' rigid motions fitted to their patches
@@ -376,7 +399,7 @@ class RigidRiders:
         moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index[self._order]]
         centre = np.add.reduceat(moved.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
         covariance = np.add.reduceat(np.einsum("rki,rkj->rij", self._patch_local, moved), self._bounds[:-1], axis=0)
-        u, _, vt = np.linalg.svd(covariance)
+        u, _, vt = np.linalg.svd(covariance + self._steady(out))
         flip = np.linalg.det(np.einsum("kij,kjl->kil", u, vt)) < 0
         vt[flip, 2, :] *= -1.0
         rotation = np.einsum("kji,klj->kil", vt, u)  # R = V U^T (p' = R p + t), one per piece

@@ -605,13 +605,15 @@ class SkinDetachedSurface:
         return self.riders
 
     def _riders_held(self, held):
-        """(k,) bool: riders ``held`` holds some vertex of (they follow their handle, not a fit);
-        kept for the last held pairs (a drag asks with the same arrays every move)."""
+        """:meth:`.riders.RigidRiders.holding` of ``held``: the riders and still vertices it holds
+        (they follow their handle, not a fit); kept for the last held pairs, the very same arrays
+        (a drag asks with them every move; they are kept here, so no other array takes their id)."""
         if not held:
             return None
-        key = tuple((label, id(ids)) for label, ids in held)
-        if self._riders_by_held[0] != key:
-            self._riders_by_held = (key, self._rigid_riders().holding(held))
+        kept = self._riders_by_held[0]
+        if kept is None or len(kept) != len(held) or any(
+                label != old_label or ids is not old_ids for (label, ids), (old_label, old_ids) in zip(held, kept)):
+            self._riders_by_held = (list(held), self._rigid_riders().holding(held))
         return self._riders_by_held[1]
 
     def prepare_layout(self, groups=None, held=None, float32=False, background=False):
