@@ -212,7 +212,7 @@ def main():
             print(installed.stdout + installed.stderr)
             print("0 passed, 1 failed")
             return 1
-        todo = [("pictures", "take_pictures")] if args.pictures else tests(args.k)
+        todo = [("pictures", "take_pictures"), ("pictures", "take_parts_picture")] if args.pictures else tests(args.k)
         passed = failed = 0
         operators, driven = set(), set()
         for module, name in todo:

@@ -73,10 +73,13 @@ def test_the_panels_build_and_detach_decide_the_eye(ui):
     after = rigs.positions(obj)
     assert np.abs(after[body] - rest[body]).max() > 0.1, "the drag did not move the head"
     assert np.abs(after[eye] - rest[eye]).max() < 1e-5, "a detached eye with no handle moved"
-    # Ctrl+Z: the drag, then the Detach (one step each): the eye rides again.
+    # Ctrl+Z three times: the drag, the set-up's step (the handle made active), the Detach (one
+    # step each): the eye rides again.
+    name = obj.name  # an undo step loads the file's data anew: references made before go
     yield from ui.hover_view()
-    yield from ui.press('Z', ctrl=True, wait=1.0)
-    yield from ui.press('Z', ctrl=True, wait=1.5)
-    obj = bpy.data.objects[obj.name]
+    for _ in range(3):
+        yield from ui.press('Z', ctrl=True, wait=1.0)
+    yield 1.0
+    obj = bpy.data.objects[name]
     assert sd.part_overrides(obj) == (None, None), sd.part_overrides(obj)
     assert np.array_equal(rigs.positions(obj), posed), "Ctrl+Z did not bring back the pose before Detach"

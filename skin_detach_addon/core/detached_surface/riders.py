@@ -52,7 +52,7 @@ RIDE_CAP = 0.05
 NEAREST = 8
 #: The size of a rider's pieces, over the whole mesh's diagonal (:class:`RigidRiders`): an eye, a
 #: plate, a bracelet is one piece and moves rigidly; a belt round a waist follows its bend.
-PIECE = 0.1
+PIECE = 0.2
 #: The most pieces a rider vertex's motion blends.
 BLEND = 8
 
