@@ -644,9 +644,24 @@ def proxy_of(obj):
     return stored_object(obj, "proxy")
 
 
+def check_topology(obj):
+    """Raise, as opening the binding does, unless every mesh of ``obj``'s rig still has the topology
+    it was bound with, its corners read anew (not the fingerprint kept since Blender last reported
+    a change: a script that reorders the vertices with bmesh, the counts the same, right after a
+    write of Skin Detach's, is reported in one update with that write)."""
+    from . import rig_members
+    for member in rig_members.objects(obj):
+        if member is not None and getattr(member, "type", None) == 'MESH':
+            mesh_io.forget_fingerprint(member.data)
+    _checked_record(obj)
+
+
 def check_unedited(obj):
-    """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape)."""
+    """Raise unless the mesh still holds what Skin Detach last wrote (or the rest shape); where it
+    does not, its topology is read anew first (:func:`check_topology`): a reordered mesh is named
+    as edited in topology, to be rebuilt, not reset."""
     if not holds_written(obj):
+        check_topology(obj)
         from . import rig_members
         what = f"mesh {obj.data.name!r}" if not rig_members.is_multi(obj) else \
             f"meshes of {', '.join(repr(name) for name in rig_members.names(obj))}"

@@ -80,6 +80,8 @@ class Deformation:
         self.several = len(self.members) > 1
         if require_unedited:
             stored.check_unedited(obj)
+        else:  # Reset writes the rest over whatever is there: its vertex order checked anew first
+            stored.check_topology(obj)
 
     def handles(self):
         """The handle and anchor empties of the object, sorted by name."""

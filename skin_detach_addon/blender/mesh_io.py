@@ -122,6 +122,12 @@ def mesh_fingerprint(mesh):
     return digest
 
 
+def forget_fingerprint(mesh):
+    """Drop ``mesh``'s kept fingerprint: the next :func:`mesh_fingerprint` reads its corners anew."""
+    _FINGERPRINTS.pop(mesh.as_pointer(), None)
+    _POSITIONS_ONLY.pop(mesh.as_pointer(), None)
+
+
 def _fingerprint_of(counts, corners):
     """:func:`mesh_fingerprint` of a mesh of ``counts`` (vertices, faces, corners) whose corners'
     vertices are ``corners``."""
