@@ -258,6 +258,15 @@ def bake(obj, frames, into=SHAPE_KEYS, path=None, preserve_volume=True, apply_mo
                             "output": writer.write(frame, detail, stretched)})
             if progress is not None:
                 progress(len(records), len(frames), records[-1])
+    except SkinDetachError as exc:
+        writer.undo()
+        if into != FILES or not records:
+            raise
+        # Files of the frames before it stay (each is complete): say which, not "nothing was written".
+        first, last = records[0]["frame"], records[-1]["frame"]
+        raise SkinDetachError(f"frame {frame}: {str(exc).replace('(nothing was written)', '(nothing of this frame was written)')}; "
+                              f"the files of the {len(records)} frames before it ({first} to {last}) are written and "
+                              f"kept") from None
     except BaseException:
         writer.undo()
         raise
@@ -400,11 +409,16 @@ class _FileWriter:
         try:
             self._export(partial, target.lower().endswith(".obj"))
             if not os.path.isfile(partial):
-                raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not")
+                raise SkinDetachError(f"path: expected {target!r} written by the exporter, it was not"
+                                      + ("" if os.path.isdir(folder) else f" (its folder {folder!r} is gone)"))
             os.replace(partial, target)
-        except BaseException:  # an error or Ctrl-C: no partial file stays behind
+        except BaseException as exc:  # an error or Ctrl-C: no partial file stays behind
             if os.path.exists(partial):
                 os.remove(partial)
+            if isinstance(exc, (RuntimeError, OSError)):  # the exporter's or the file system's words
+                reason = f"its folder {folder!r} is gone" if not os.path.isdir(folder) else \
+                    f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else exc!r}"
+                raise SkinDetachError(f"path: expected to write {target!r}, could not ({reason})") from None
             raise
         _remove_orphans(folder, name)
         return target
