@@ -214,6 +214,9 @@ def test_the_object_menus_list_every_operator(scene):
         def menu(self, idname, **_):
             getattr(bpy.types, idname).draw(type("Menu", (), {"layout": self})(), bpy.context)
 
+        def operator_menu_enum(self, idname, prop, **_):  # a submenu of the operator's choices
+            drawn.append(idname)
+
         def separator(self):
             pass
 
