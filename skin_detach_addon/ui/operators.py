@@ -88,6 +88,13 @@ def build_report(stats):
             f"{stats['case3']:,}){parts}{preview}{kept}{dropped}")
 
 
+def _pressed(event):
+    """The key or click of ``event`` as Blender's keymap writes it (Ctrl+Z, Tab, X)."""
+    name = {'TAB': "Tab", 'DEL': "Delete", 'RET': "Enter", 'LEFTMOUSE': "a click", 'RIGHTMOUSE': "a right click"}.get(
+        event.type, event.type.title())
+    return "".join(f"{mod}+" for mod, on in (("Ctrl", event.ctrl), ("Shift", event.shift), ("Alt", event.alt)) if on) + name
+
+
 def build_text(job):
     """What the panel and the status bar say of a running build: its stage and percent."""
     return f"{job.stage} {100 * job.fraction:.0f} %"
@@ -180,7 +187,8 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
 
     def modal(self, context, event):
         """Esc cancels (nothing is written); TIMER events show the progress and, once the core is
-        done, write every object (one undo step); the view's navigation passes, other events wait."""
+        done, write every object (one undo step); the view's navigation and Ctrl+S (save) pass; any
+        other key or click is not taken, and a warning says so."""
         job = self.job
         if event.type == 'ESC' and event.value == 'PRESS':
             job.cancel()
@@ -203,6 +211,12 @@ class SKIN_DETACH_OT_build(_Operator, bpy.types.Operator):
                 return {'FINISHED'}
         if event.type in _NAVIGATION or event.type.startswith(_NAVIGATION_PREFIXES):
             return {'PASS_THROUGH'}
+        if event.type == 'S' and (event.ctrl or event.oskey) and not event.alt:
+            return {'PASS_THROUGH'}  # Ctrl+S (Shift+Ctrl+S): saving never waits for a build
+        if event.value == 'PRESS' and not event.type.startswith(("LEFT_", "RIGHT_", "OSKEY", "EVT_")):
+            # Any other key or click would change what is being bound: it is not taken, and said so.
+            self.report({'WARNING'}, f"Skin Detach: building {job.name} ({build_text(job)}): "
+                                     f"{_pressed(event)} not taken until the build ends (Esc cancels it; Ctrl+S saves)")
         return {'RUNNING_MODAL'}
 
     def _show(self, context):
