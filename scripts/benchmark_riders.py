@@ -227,6 +227,8 @@ def several_objects(size, faces, moves):
     centre = body_points[:, middle].mean()
     mirrored[:, middle] = 2 * centre - mirrored[:, middle]
     parts["eye2"] = (mirrored, parts["eye"][1][:, ::-1])
+    # Joined in the rig's order (the owner, then the others by name), so both builds see one mesh.
+    parts = dict(sorted(parts.items()))
     points, triangles, ranges = joined((body_points, body_triangles), parts)
     scenario = bend_scenario(body_points)
     diag = float(np.linalg.norm(np.ptp(points, axis=0)))
@@ -236,8 +238,9 @@ def several_objects(size, faces, moves):
         bpy.ops.wm.read_homefile(use_empty=True)
         if setup == "joined":
             objects = [blender_mesh("character", points, triangles)]
-        else:
-            objects = [blender_mesh(kind, points[ids], _local(triangles, ids)) for kind, ids in ranges.items()]
+        else:  # named so that the rig's order (the owner, then by name) is the joined mesh's
+            objects = [blender_mesh(f"{k}_{kind}", points[ids], _local(triangles, ids))
+                       for k, (kind, ids) in enumerate(ranges.items())]
         start = time.perf_counter()
         api.build(objects if setup == "separate" else objects[0], target_faces=faces)
         out[f"build_{setup}_s"] = time.perf_counter() - start

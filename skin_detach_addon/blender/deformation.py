@@ -275,6 +275,7 @@ class Deformation:
         where it was bound, finite) before any is written."""
         parts = rig_members.split(self.obj, detail) if parts is None else parts
         rig_members.check_writable(self.obj, parts)
+        self.binding.mesh_guard.before_write(take=lambda: rig_members.snapshot(self.obj))
         rig_members.write_parts(self.obj, parts)
         mesh_io.write_positions(self.proxy.data, proxy_positions, checked=True)
         if mark:

@@ -21,10 +21,11 @@ class MeshGuard:
         """A previewing drag starts: the next write of the mesh keeps its snapshot first."""
         self.armed, self.snapshot = True, None
 
-    def before_write(self, mesh):
-        """The bound ``mesh`` is about to be written: keep its snapshot when armed and none is kept yet."""
+    def before_write(self, mesh=None, take=None):
+        """The bound ``mesh`` is about to be written: keep its snapshot when armed and none is kept
+        yet (``take()``, instead, makes the snapshot: every object of a rig of several)."""
         if self.armed and self.snapshot is None:
-            self.snapshot = mesh_io.snapshot(mesh)
+            self.snapshot = take() if take is not None else mesh_io.snapshot(mesh)
 
     def release(self):
         """The drag ends: disarm and return the snapshot kept meanwhile, or None (not written)."""

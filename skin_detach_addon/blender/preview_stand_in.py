@@ -1,6 +1,7 @@
 """The preview object standing in for its bound mesh in viewports while a drag shows it.
 
-While it stands in, the mesh is hidden in the current view layer (as H hides it: the object stays
+While it stands in, the mesh (every object of a rig of several: the preview is the whole rig's) is
+hidden in the current view layer (as H hides it: the object stays
 in Blender's dependency graph, so hiding and showing it costs no rebuild of the graph's relations
 nor a new evaluation of millions of vertices, which ``hide_viewport`` cost the first move of every
 drag: 54-112 ms at 1.2M vertices) and the binding's record names that view layer under
@@ -9,6 +10,8 @@ hid the mesh with ``hide_viewport`` and recorded its own state under :data:`OLD_
 """
 
 from . import binding as stored
+from . import rig_members
+from ..core.errors import SkinDetachError
 
 #: The binding's record names the view layer the mesh is hidden in while the preview stands in.
 STAND_IN_KEY = "mesh_hidden_in"
@@ -62,7 +65,9 @@ def record_stand_in(obj, preview):
     preview.hide_viewport = False
     if obj.name in layer.objects:
         obj[stored.KEY][STAND_IN_KEY] = layer.name
-        obj.hide_set(True, view_layer=layer)
+        for member in _members(obj):  # the owner, and the other objects of a rig of several
+            if member.name in layer.objects:
+                member.hide_set(True, view_layer=layer)
     else:
         obj[stored.KEY][OLD_STAND_IN_KEY] = bool(obj.hide_viewport)
         obj.hide_viewport = True
@@ -79,9 +84,21 @@ def end_stand_in(obj):
     if STAND_IN_KEY in record:
         layer = _view_layer(obj, record[STAND_IN_KEY])
         if layer is not None:
-            obj.hide_set(False, view_layer=layer)
+            for member in _members(obj):
+                if member.name in layer.objects:
+                    member.hide_set(False, view_layer=layer)
         del record[STAND_IN_KEY]
     if OLD_STAND_IN_KEY in record:
         if obj.hide_viewport:
             obj.hide_viewport = bool(record[OLD_STAND_IN_KEY])
         del record[OLD_STAND_IN_KEY]
+
+
+def _members(obj):
+    """The objects the preview of ``obj`` stands for: ``obj``, and the other objects of its rig of
+    several (those still there)."""
+    try:
+        found = rig_members.objects(obj)
+    except SkinDetachError:  # a damaged record: the owner alone
+        return [obj]
+    return [member for member in found if member is not None and getattr(member, "type", None) == 'MESH'] or [obj]

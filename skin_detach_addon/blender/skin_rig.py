@@ -192,8 +192,8 @@ class BuildJob:
         self.preview_vertices = None
         n = self.positions.shape[0]
         # A mesh too small for a preview of at least MIN_PREVIEW_VERTICES (an eighth of it) gets
-        # none; a rig of several objects gets none (the preview stands in for one mesh).
-        if not several and preview_above is not None and n > preview_above and n // 8 >= MIN_PREVIEW_VERTICES:
+        # none; a rig of several objects gets one for all of them (it stands in for every one).
+        if preview_above is not None and n > preview_above and n // 8 >= MIN_PREVIEW_VERTICES:
             self.preview_vertices = min(PREVIEW_VERTICES, n // 8)
         #: How far the core's build got (0 to 1) and the name of its current stage.
         self.fraction, self.stage = 0.0, "waiting"
