@@ -9,7 +9,8 @@ from skin_detach_addon.core import SkinDetachedSurface
 from skin_detach_addon.core.geometry import unique_edges
 from skin_detach_addon.core.detached_surface import surface as surface_module
 from skin_detach_addon.core.detached_surface.sliver_repair import (CAP_DEGREES, SLIVER_DEGREES, face_angles,
-                                                                   flip_slivers, is_sliver, relax_slivers,
+                                                                   flip_slivers, is_sliver, no_repair,
+                                                                   relax_slivers,
                                                                    repair_slivers)
 
 
@@ -88,7 +89,7 @@ def test_the_fixtures_have_slivers():
 
 def test_a_flat_proxy_loses_its_slivers_and_stays_where_it_was():
     points, triangles, _ = flat_with_slivers()
-    new_points, new_triangles, _ = repair_slivers(points, triangles)
+    new_points, new_triangles, _, _ = repair_slivers(points, triangles)
     angles = face_angles(new_points, new_triangles)
     assert not is_sliver(angles).any()
     assert angles.min() > least_angle(points, triangles)
@@ -100,7 +101,7 @@ def test_a_flat_proxy_loses_its_slivers_and_stays_where_it_was():
 
 def test_a_closed_proxy_stays_closed_with_its_volume():
     points, triangles = closed_with_slivers()
-    new_points, new_triangles, _ = repair_slivers(points, triangles)
+    new_points, new_triangles, _, _ = repair_slivers(points, triangles)
     assert is_sliver(face_angles(new_points, new_triangles)).sum() == 0
     assert least_angle(new_points, new_triangles) > least_angle(points, triangles)
     _, counts = unique_edges(new_triangles)
@@ -114,7 +115,7 @@ def test_a_closed_proxy_stays_closed_with_its_volume():
 def test_a_proxy_without_slivers_comes_back_as_it_went_in():
     points, triangles = octahedron_sphere(3)
     assert not is_sliver(face_angles(points, triangles)).any()
-    new_points, new_triangles, remap = repair_slivers(points, triangles)
+    new_points, new_triangles, remap, _ = repair_slivers(points, triangles)
     assert np.array_equal(new_triangles, triangles) and np.array_equal(new_points, points)
     assert np.array_equal(remap, np.arange(points.shape[0]))
 
@@ -131,22 +132,22 @@ def test_flips_and_moves_leave_the_border_fans():
     edges, counts = unique_edges(triangles)
     border = np.zeros(points.shape[0], dtype=bool)
     border[edges[counts == 1].ravel()] = True
-    flipped = flip_slivers(points, triangles, border)
+    flipped, _ = flip_slivers(points, triangles, border)
     on_border = border[triangles].any(axis=1)
     assert np.array_equal(flipped[on_border], triangles[on_border])
-    relaxed = relax_slivers(points, triangles, border)
+    relaxed, _ = relax_slivers(points, triangles, border)
     assert np.array_equal(relaxed[border], points[border])
-    new_points, new_triangles, _ = repair_slivers(points, triangles)
+    new_points, new_triangles, _, _ = repair_slivers(points, triangles)
     assert least_angle(new_points, new_triangles) > least_angle(points, triangles)
-    everywhere = flip_slivers(points, triangles, np.zeros_like(border))
+    everywhere, _ = flip_slivers(points, triangles, np.zeros_like(border))
     assert not np.array_equal(everywhere[on_border], triangles[on_border])  # the fixture has a border flip to refuse
 
 
 def test_rigid_motion_and_scale_give_the_same_repair():
     points, triangles = closed_with_slivers()
-    new_points, new_triangles, remap = repair_slivers(points, triangles)
+    new_points, new_triangles, remap, _ = repair_slivers(points, triangles)
     rotation = random_rotation(3)
-    moved_points, moved_triangles, moved_remap = repair_slivers(2.5 * points @ rotation.T + [4.0, -1.0, 7.0], triangles)
+    moved_points, moved_triangles, moved_remap, _ = repair_slivers(2.5 * points @ rotation.T + [4.0, -1.0, 7.0], triangles)
     assert np.array_equal(moved_triangles, new_triangles) and np.array_equal(moved_remap, remap)
     assert np.allclose(moved_points, 2.5 * new_points @ rotation.T + [4.0, -1.0, 7.0], atol=1e-12)
 
@@ -161,7 +162,7 @@ def test_the_build_repairs_its_proxy_and_rebuilds_its_rest(bundled, monkeypatch)
     points, triangles = bundled("fandisk")
     built = SkinDetachedSurface.build(points, triangles, target_faces=600)
     assert np.abs(built.reconstruct(built.proxy_vertices) - points).max() < 1e-9 * np.ptp(points, axis=0).max() * 1e3
-    monkeypatch.setattr(surface_module, "repair_slivers", lambda p, t: (p, t, np.arange(p.shape[0])))
+    monkeypatch.setattr(surface_module, "repair_slivers", no_repair)
     unrepaired = SkinDetachedSurface.build(points, triangles, target_faces=600)
     assert unrepaired.stats["proxy_slivers"] > 3 * max(built.stats["proxy_slivers"], 1)
     assert built.stats["proxy_least_angle"] > unrepaired.stats["proxy_least_angle"]
