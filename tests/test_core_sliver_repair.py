@@ -1,17 +1,18 @@
 """The proxy's sliver repair: slivers out, the least angle never falling, the surface kept, the
-border and sliver-free proxies left alone, rigid motion and scale, and the build's use of it."""
+border and sliver-free proxies left alone, rigid motion and scale, the build's use of it, and its
+limits (issue 52): faces kept near the target, work bounded, on thin rods and a flat sheet."""
 
 import numpy as np
 import pytest
 
-from shapes import plane, random_rotation
+from shapes import cylinder, plane, random_rotation
 from skin_detach_addon.core import SkinDetachedSurface
 from skin_detach_addon.core.geometry import unique_edges
 from skin_detach_addon.core.detached_surface import surface as surface_module
-from skin_detach_addon.core.detached_surface.sliver_repair import (CAP_DEGREES, SLIVER_DEGREES, face_angles,
+from skin_detach_addon.core.detached_surface.sliver_repair import (CAP_DEGREES, KEEP_FACES, PASSES, SLIVER_DEGREES,
+                                                                   WORK, collapse_slivers, face_angles,
                                                                    flip_slivers, is_sliver, no_repair,
-                                                                   relax_slivers,
-                                                                   repair_slivers)
+                                                                   relax_slivers, repair_slivers)
 
 
 def octahedron_sphere(levels=2):
@@ -167,3 +168,73 @@ def test_the_build_repairs_its_proxy_and_rebuilds_its_rest(bundled, monkeypatch)
     assert unrepaired.stats["proxy_slivers"] > 3 * max(built.stats["proxy_slivers"], 1)
     assert built.stats["proxy_least_angle"] > unrepaired.stats["proxy_least_angle"]
     assert built.stats["proxy_slivers"] == int(is_sliver(face_angles(built.proxy_vertices, built.proxy_faces)).sum())
+
+
+def build_on_and_off(monkeypatch, points, triangles, target):
+    """(the build with the repair, the same build without it)."""
+    built = SkinDetachedSurface.build(points, triangles, target_faces=target)
+    with monkeypatch.context() as patch:
+        patch.setattr(surface_module, "repair_slivers", no_repair)
+        unrepaired = SkinDetachedSurface.build(points, triangles, target_faces=target)
+    return built, unrepaired
+
+
+def assert_within_limits(built, unrepaired, target):
+    """Faces at least 95 % of the target (or the stat says why), the least angle and the slivers no
+    worse than without the repair, the work within its budget."""
+    stats, before = built.stats, unrepaired.stats
+    assert stats["proxy_faces"] >= 0.95 * target or stats["proxy_short_of_target"]
+    assert stats["proxy_faces"] >= min(int(np.ceil(KEEP_FACES * target)), before["proxy_faces"])  # merges stop there
+    assert stats["proxy_least_angle"] >= before["proxy_least_angle"]
+    assert stats["proxy_slivers"] <= before["proxy_slivers"]
+    # Work: WORK face-angle rows per face of the proxy it was given, and at most one pass's worth
+    # over (a relaxation pass evaluates every face and three times the faces it moves: 10 per face).
+    assert 0 < stats["sliver_angle_rows"] <= (WORK + 10) * before["proxy_faces"]
+    assert stats["sliver_passes"] <= 4 * PASSES
+
+
+@pytest.mark.parametrize("radius", [0.02, 0.1])
+def test_a_thin_rod_keeps_its_faces_and_the_work_stays_bounded(monkeypatch, radius):
+    """The reviewer's rod (issue 52: radius 0.02, length 4, 4,826 vertices; 23,784 face_angles
+    calls and 507 of 954 faces slivers): a proxy whose faces are long needles whatever is done
+    (its 1,000 faces on 0.5 of area, four vertices around)."""
+    points, triangles = cylinder(radius=radius, length=4.0, around=24, along=200)
+    assert points.shape[0] == 4826
+    built, unrepaired = build_on_and_off(monkeypatch, points, triangles, 1000)
+    assert_within_limits(built, unrepaired, 1000)
+
+
+@pytest.mark.parametrize("target", [50, 300])
+def test_a_flat_sheet_keeps_its_faces_flat_and_near_the_target(monkeypatch, target):
+    """A flat 60 x 60 sheet (issue 52: 36 of 50 and 270 of 300 faces): the repair's merges stop at
+    the floor and every move stays in the plane."""
+    points, triangles = plane(n=60)
+    points[:, 2] = 0.0
+    built, unrepaired = build_on_and_off(monkeypatch, points, triangles, target)
+    assert_within_limits(built, unrepaired, target)
+    assert unrepaired.stats["proxy_slivers"] > built.stats["proxy_slivers"]  # there was something to repair
+    assert np.all(built.proxy_vertices[:, 2] == 0.0)
+    proxy = built.proxy_vertices[built.proxy_faces]
+    normal_z = np.cross(proxy[:, 1] - proxy[:, 0], proxy[:, 2] - proxy[:, 0])[:, 2]
+    assert np.all(normal_z > 0) or np.all(normal_z < 0)  # no face turned over
+
+
+def test_merges_stop_at_the_floor_but_vertices_at_one_point_still_merge():
+    points, triangles, _ = flat_with_slivers()
+    k = triangles.shape[0]
+    _, free, _, merges, _ = collapse_slivers(points, triangles)
+    assert merges >= 1 and free.shape[0] == k - 2 * merges  # the fixture has merges to make
+    _, kept, _, merges, _ = collapse_slivers(points, triangles, floor=k - 1)
+    assert merges == 0 and np.array_equal(kept, triangles)
+    _, kept, _, merges, _ = collapse_slivers(points, triangles, floor=k - 2)
+    assert merges == 1 and kept.shape[0] == k - 2
+    _, _, _, figures = repair_slivers(points, triangles, target=k)
+    assert figures["sliver_merges"] <= (k - int(np.ceil(KEEP_FACES * k))) // 2
+    # A vertex on top of its neighbour: its faces have no area, and it merges under the floor too.
+    edges, counts = unique_edges(triangles)
+    inner = edges[counts == 2]
+    a, b = inner[len(inner) // 2]
+    on_top = points.copy()
+    on_top[a] = points[b] + 1e-9
+    _, merged, remap, merges, at_one_point = collapse_slivers(on_top, triangles, floor=k)
+    assert merges == at_one_point == 1 and merged.shape[0] == k - 2 and remap[a] == remap[b]

@@ -49,6 +49,7 @@ MOVED = 0.05
 #: Vertices this close (a fraction of the proxy's bounding-box diagonal) are one point: merged
 #: wherever the mesh stays manifold.
 COINCIDENT = 1e-6
+FOLD_CHECK = True
 #: A flip raises the least angle of its two faces by more than this (degrees).
 GAIN_DEGREES = 0.5
 #: A vertex is relaxed only where its faces' normals lie within this of its own (degrees).
@@ -58,10 +59,14 @@ PASSES = 20
 #: Merges stop where the proxy would keep fewer than this share of the build's target faces (each
 #: takes two faces away); vertices at one point still merge.
 KEEP_FACES = 0.97
-#: A collapse pass tries at most this many slivers per merge it may still make (above the floor).
+#: The collapses try at most this many merges per merge the floor allows (vertices at one point
+#: aside).
 TRIES = 4
 #: The repair evaluates at most this many face-angle rows per proxy face (and a pass's worth more).
-WORK = 1000
+WORK = 40
+#: The shares of the budget the operations may reach in turn (flips, collapses, relaxation, flips);
+#: what one leaves goes to the next.
+SHARES = (0.3, 0.3, 0.2, 0.2)
 
 
 def face_angles(points, triangles):
@@ -94,10 +99,14 @@ def repair_slivers(points, triangles, target=None):
     work = _Work(WORK * max(triangles.shape[0], 1))
     floor = 0 if target is None else int(np.ceil(KEEP_FACES * target))
     border = _border_vertices(triangles, points.shape[0])
+    work.limit = SHARES[0] * work.budget
     faces, flips = flip_slivers(points, triangles, border, work)
+    work.limit = sum(SHARES[:2]) * work.budget
     merged_points, faces, remap, merges, coincident = collapse_slivers(points, faces, floor, work)
     border = _border_vertices(faces, merged_points.shape[0])
+    work.limit = sum(SHARES[:3]) * work.budget
     relaxed, moves = relax_slivers(merged_points, faces, border, work)
+    work.limit = work.budget
     faces, more = flip_slivers(relaxed, faces, border, work)
     short = ""
     if target is not None and faces.shape[0] < 0.95 * target:
@@ -124,11 +133,12 @@ def no_repair(points, triangles, target=None):
 
 
 class _Work:
-    """The repair's work: face-angle rows evaluated and passes made, against a budget of rows;
-    every operation stops its passes once the budget is spent."""
+    """The repair's work: face-angle rows evaluated and passes made, against a budget of rows
+    (``limit``: the rows the operation under way may reach, its share of the budget and what the
+    ones before left); every operation stops its passes once it reaches its limit."""
 
     def __init__(self, budget):
-        self.budget, self.rows, self.passes = budget, 0, 0
+        self.budget, self.limit, self.rows, self.passes = budget, budget, 0, 0
 
     def angles(self, points, triangles):
         self.rows += triangles.shape[0]
@@ -136,7 +146,7 @@ class _Work:
 
     def next_pass(self):
         """Whether another pass may start (counts it)."""
-        if self.rows >= self.budget:
+        if self.rows >= self.limit:
             return False
         self.passes += 1
         return True
@@ -221,20 +231,26 @@ def flip_slivers(points, triangles, border, work=None):
         better = ((np.minimum(angles_first.min(axis=1), angles_second.min(axis=1)) > worst + GAIN_DEGREES)
                   & (is_sliver(angles_first).astype(int) + is_sliver(angles_second)
                      <= sliver[first].astype(int) + sliver[second]))
-        ok = np.flatnonzero((area_first > 0.0) & (area_second > 0.0) & (planar | thin) & upright & better)
+        # The fold across the new edge no sharper than across the old one (or within FLAT_DEGREES).
+        fold = (np.einsum("ij,ij->i", unit_new_first, unit_new_second)
+                >= np.minimum(np.einsum("ij,ij->i", unit_first, unit_second), flat)) | (not FOLD_CHECK)
+        ok = np.flatnonzero((area_first > 0.0) & (area_second > 0.0) & (planar | thin) & upright & better & fold)
         ok = ok[np.argsort(worst[ok], kind="stable")]
-        edges = set((np.minimum(faces, faces[:, [1, 2, 0]]) * m + np.maximum(faces, faces[:, [1, 2, 0]])).ravel().tolist())
+        ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+        new_keys = np.minimum(c[ok], d[ok]) * m + np.maximum(c[ok], d[ok])
+        exists = np.isin(new_keys, ends[:, 0] * m + ends[:, 1]).tolist()
+        old_keys = (np.minimum(a[ok], b[ok]) * m + np.maximum(a[ok], b[ok])).tolist()
         touched = np.zeros(faces.shape[0], dtype=bool)
+        added, removed = set(), set()
         flipped = 0
-        for pair in ok.tolist():
+        for pair, new_edge, there, old_edge in zip(ok.tolist(), new_keys.tolist(), exists, old_keys):
             f, g = first[pair], second[pair]
-            new_edge = min(c[pair], d[pair]) * m + max(c[pair], d[pair])
-            if touched[f] or touched[g] or new_edge in edges:
+            if touched[f] or touched[g] or new_edge in added or (there and new_edge not in removed):
                 continue
             faces[f], faces[g] = new_first[pair], new_second[pair]
             touched[f] = touched[g] = True
-            edges.discard(min(a[pair], b[pair]) * m + max(a[pair], b[pair]))
-            edges.add(new_edge)
+            removed.add(old_edge)
+            added.add(new_edge)
             flipped += 1
         total += flipped
         if not flipped:
@@ -247,8 +263,8 @@ def collapse_slivers(points, triangles, floor=0, work=None):
     :data:`PASSES` passes or ``work`` (a _Work) is spent: (points (m', 3) the vertices kept, in
     their order, triangles (k', 3), remap (m,) the vertex each earlier one is now, merges made,
     of them merges of vertices at one point). ``points`` (m, 3), ``triangles`` (k, 3). A merge
-    takes two faces away: none is made that would leave fewer than ``floor`` faces, and a pass
-    tries at most :data:`TRIES` slivers per merge left above the floor; vertices within
+    takes two faces away: none is made that would leave fewer than ``floor`` faces, and at most
+    :data:`TRIES` merges are tried per merge the floor allows; vertices within
     :data:`COINCIDENT` of the diagonal of each other (faces without area) still merge."""
     work = _Work(np.inf) if work is None else work
     points = np.asarray(points, dtype=np.float64)
@@ -262,6 +278,7 @@ def collapse_slivers(points, triangles, floor=0, work=None):
             around[vertex].add(index)
     coincident = COINCIDENT * bbox_diagonal(points) if m else 0.0
     left, merges, at_one_point = faces.shape[0], 0, 0
+    tries = TRIES * max((left - floor) // 2, 0)
     for _ in range(PASSES):
         if not work.next_pass():
             break
@@ -272,20 +289,20 @@ def collapse_slivers(points, triangles, floor=0, work=None):
         corners = points[faces[slivers]]
         edges = corners[:, [1, 2, 0]] - corners
         at_point = (np.sqrt((edges * edges).sum(axis=2)).min(axis=1) <= coincident).tolist()
-        merged, tries = 0, TRIES * max((left - floor) // 2, 0)
+        merged = 0
         for sliver, close in zip(slivers.tolist(), at_point):
             if not alive[sliver] or ((left - 2 < floor or tries <= 0) and not close):
-                continue  # under the floor, or its tries spent, only vertices at one point still merge
-            tries -= 1
-            if work.rows >= work.budget:
+                continue  # under the floor, or the tries spent, only vertices at one point still merge
+            if work.rows >= work.limit:
                 break
             own = work.angles(points, faces[sliver][None])[0]
             if not is_sliver(own[None])[0]:
                 continue
             for apex, into in _merges(points, faces[sliver].tolist(), own):
                 one_point = _length(points[apex] - points[into]) <= coincident
-                if not one_point and left - 2 < floor:
+                if not one_point and (left - 2 < floor or tries <= 0):
                     continue
+                tries -= not one_point
                 if not _collapsible(points, faces, around, apex, into, own.min(), coincident, work):
                     continue
                 for index in list(around[apex]):
