@@ -165,7 +165,8 @@ def test_the_build_repairs_its_proxy_and_rebuilds_its_rest(bundled, monkeypatch)
     assert np.abs(built.reconstruct(built.proxy_vertices) - points).max() < 1e-9 * np.ptp(points, axis=0).max() * 1e3
     monkeypatch.setattr(surface_module, "repair_slivers", no_repair)
     unrepaired = SkinDetachedSurface.build(points, triangles, target_faces=600)
-    assert unrepaired.stats["proxy_slivers"] > 3 * max(built.stats["proxy_slivers"], 1)
+    # 118 -> 42: flips that would sharpen a fold across fandisk's creases are left (39 with them).
+    assert unrepaired.stats["proxy_slivers"] > 2.5 * max(built.stats["proxy_slivers"], 1)
     assert built.stats["proxy_least_angle"] > unrepaired.stats["proxy_least_angle"]
     assert built.stats["proxy_slivers"] == int(is_sliver(face_angles(built.proxy_vertices, built.proxy_faces)).sum())
 
@@ -238,3 +239,25 @@ def test_merges_stop_at_the_floor_but_vertices_at_one_point_still_merge():
     on_top[a] = points[b] + 1e-9
     _, merged, remap, merges, at_one_point = collapse_slivers(on_top, triangles, floor=k)
     assert merges == at_one_point == 1 and merged.shape[0] == k - 2 and remap[a] == remap[b]
+
+
+def test_a_flip_leaves_the_fold_across_its_edge_no_sharper():
+    """A needle (3.5 degrees) and its neighbour, folded 13 degrees across their edge: the other
+    diagonal would raise the least angle to 4.2 but fold the pair 16.8 degrees (the skin seams
+    where the proxy folds), so the edge stays; laid flat, the same pair flips."""
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.04, 0.058, -0.008], [0.062, -0.549, 0.212]])
+    pair, flipped_pair = np.array([[0, 1, 2], [1, 0, 3]]), np.array([[0, 3, 2], [3, 1, 2]])
+    free = np.zeros(4, dtype=bool)
+
+    def fold(p, faces):
+        n = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+        n /= np.linalg.norm(n, axis=1)[:, None]
+        return np.degrees(np.arccos(np.clip(n[0] @ n[1], -1.0, 1.0)))
+    assert fold(points, flipped_pair) > fold(points, pair) + 3.0
+    assert least_angle(points, flipped_pair) > least_angle(points, pair) + 0.5
+    faces, flips = flip_slivers(points, pair, free)
+    assert flips == 0 and np.array_equal(faces, pair)
+    flat = points.copy()
+    flat[:, 2] = 0.0
+    faces, flips = flip_slivers(flat, pair, free)
+    assert flips == 1 and {tuple(sorted(f)) for f in faces.tolist()} == {(0, 2, 3), (1, 2, 3)}

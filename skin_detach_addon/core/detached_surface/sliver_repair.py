@@ -49,7 +49,9 @@ MOVED = 0.05
 #: Vertices this close (a fraction of the proxy's bounding-box diagonal) are one point: merged
 #: wherever the mesh stays manifold.
 COINCIDENT = 1e-6
-FOLD_CHECK = True
+#: A flip leaves the cosine of the fold across its edge (between the two faces' normals) at most
+#: this much under the old one's.
+FOLD_SLACK = 1e-4
 #: A flip raises the least angle of its two faces by more than this (degrees).
 GAIN_DEGREES = 0.5
 #: A vertex is relaxed only where its faces' normals lie within this of its own (degrees).
@@ -231,9 +233,10 @@ def flip_slivers(points, triangles, border, work=None):
         better = ((np.minimum(angles_first.min(axis=1), angles_second.min(axis=1)) > worst + GAIN_DEGREES)
                   & (is_sliver(angles_first).astype(int) + is_sliver(angles_second)
                      <= sliver[first].astype(int) + sliver[second]))
-        # The fold across the new edge no sharper than across the old one (or within FLAT_DEGREES).
+        # The fold across the new edge no sharper than across the old one (FOLD_SLACK: flat pairs
+        # stay flippable): a flip that turns the pair's fold across a crease line seams the skin.
         fold = (np.einsum("ij,ij->i", unit_new_first, unit_new_second)
-                >= np.minimum(np.einsum("ij,ij->i", unit_first, unit_second), flat)) | (not FOLD_CHECK)
+                >= np.einsum("ij,ij->i", unit_first, unit_second) - FOLD_SLACK)
         ok = np.flatnonzero((area_first > 0.0) & (area_second > 0.0) & (planar | thin) & upright & better & fold)
         ok = ok[np.argsort(worst[ok], kind="stable")]
         ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
