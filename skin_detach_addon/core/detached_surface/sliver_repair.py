@@ -75,7 +75,7 @@ RELAX_FLAT_DEGREES = 25.0
 PASSES = 20
 #: Merges stop where the proxy would keep fewer than this share of the build's target faces (each
 #: takes two faces away); vertices at one point still merge.
-KEEP_FACES = 0.97
+KEEP_FACES = 0.95
 #: The collapses try at most this many merges per merge the floor allows (vertices at one point
 #: aside).
 TRIES = 4
