@@ -7,12 +7,13 @@ import pytest
 
 from shapes import cylinder, plane, random_rotation
 from skin_detach_addon.core import SkinDetachedSurface
-from skin_detach_addon.core.geometry import unique_edges
+from skin_detach_addon.core.geometry import unique_edges, vertex_faces
 from skin_detach_addon.core.detached_surface import surface as surface_module
 from skin_detach_addon.core.detached_surface.sliver_repair import (CAP_DEGREES, KEEP_FACES, PASSES, SLIVER_DEGREES,
                                                                    WORK, collapse_slivers, face_angles,
                                                                    flip_slivers, is_sliver, no_repair,
-                                                                   relax_slivers, repair_slivers)
+                                                                   relax_slivers, repair_slivers,
+                                                                   _worst_on_their_faces)
 
 
 def octahedron_sphere(levels=2):
@@ -272,3 +273,27 @@ def test_a_flip_that_would_leave_more_slivers_is_not_made():
     assert least_angle(points, flipped_pair) > least_angle(points, pair) + 0.5
     faces, flips = flip_slivers(points, pair, np.zeros(4, dtype=bool))
     assert flips == 0 and np.array_equal(faces, pair)
+
+
+def test_relaxation_moves_no_two_vertices_of_one_face_at_once():
+    """A pass moves only candidates that are the worst candidate on each of their faces: each is
+    judged on its own faces with its neighbours where they were (two on a face would each be
+    judged with the other still in place, and both moves together may lower the face)."""
+    points, triangles = plane(n=8)
+    m = points.shape[0]
+    indptr, around = vertex_faces(triangles, m)
+    owner = np.repeat(np.arange(m), np.diff(indptr))
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        candidate = rng.random(m) < 0.6
+        worst = rng.random(m).round(1)  # ties too
+        chosen = _worst_on_their_faces(candidate, worst, triangles, owner, around)
+        assert not (chosen & ~candidate).any()
+        assert chosen[triangles].sum(axis=1).max() == 1  # no face with two chosen corners
+        ids = np.flatnonzero(candidate)
+        assert chosen[ids[np.argmin(worst[ids])]]  # the worst candidate goes first
+        # Every candidate left out shares a face with a chosen one or a worse candidate.
+        for vertex in np.flatnonzero(candidate & ~chosen).tolist():
+            ring = np.unique(triangles[around[indptr[vertex]:indptr[vertex + 1]]])
+            others = ring[(ring != vertex) & candidate[ring]]
+            assert (worst[others] <= worst[vertex]).any()

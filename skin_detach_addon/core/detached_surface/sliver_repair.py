@@ -428,15 +428,9 @@ def relax_slivers(points, triangles, border, work=None):
         cosine = (areas * normal[owner]).sum(axis=1) / np.where(sizes * lengths[owner] > 0.0, sizes * lengths[owner], 1.0)
         steep = np.bincount(owner, (cosine < flat) | (sizes == 0.0), minlength=m) > 0
         candidate &= ~steep & (lengths > 0.0)
-        # Worst first and no two on one face: a vertex goes where it has the lowest key on each of
-        # its faces (key: its rank by its faces' least angle).
         worst = np.full(m, np.inf)
         np.minimum.at(worst, owner, least[around])
-        ids = np.flatnonzero(candidate)
-        key = np.full(m, ids.size, dtype=np.int64)
-        key[ids[np.argsort(worst[ids], kind="stable")]] = np.arange(ids.size)
-        lowest = key[faces].min(axis=1)
-        chosen = candidate & (np.bincount(owner, lowest[around] != key[owner], minlength=m) == 0)
+        chosen = _worst_on_their_faces(candidate, worst, faces, owner, around)
         if not chosen.any():
             break
         rows = np.flatnonzero(chosen[owner])  # incidences of the chosen vertices, grouped by vertex
@@ -470,3 +464,16 @@ def relax_slivers(points, triangles, border, work=None):
         if not moved:
             break
     return points, total
+
+
+def _worst_on_their_faces(candidate, worst, faces, owner, around):
+    """(m,) bool: the ``candidate`` (m,) bool vertices whose key is the lowest among the candidates
+    on each of their faces (key: the rank by ``worst`` (m,), ties by vertex id), so no two chosen
+    share a face and the worst candidate is always chosen. ``faces`` (k, 3); ``owner`` and
+    ``around`` (3k,): each (vertex, face) incidence's vertex and face (geometry.vertex_faces)."""
+    m = candidate.shape[0]
+    ids = np.flatnonzero(candidate)
+    key = np.full(m, ids.size, dtype=np.int64)
+    key[ids[np.argsort(worst[ids], kind="stable")]] = np.arange(ids.size)
+    lowest = key[faces].min(axis=1)
+    return candidate & (np.bincount(owner, lowest[around] != key[owner], minlength=m) == 0)
