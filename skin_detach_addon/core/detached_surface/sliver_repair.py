@@ -18,7 +18,7 @@ remakes and keeps the surface where it was (within :data:`MOVED` of the edge it 
    long edge), the new edge not an edge already, no face turned, and the fold across the new
    edge no sharper than across the old one (:data:`FOLD_SLACK`): creases in a bend come from the
    skin's seams over proxy folds, and a flip that turns a fold across the proxy's crease line
-   moves a seam there (a thin rod's bend, radius 0.1: 705 creases with such flips, 90 without,
+   moves a seam there (a thin rod's bend, radius 0.1: 705 creases with such flips, 168 without,
    239 with no repair). A flip may leave both faces slivers, their least angle higher (a cap
    beside a fair face made two needles: caps bind worse);
 2. collapse: a cap's apex merged into the nearer end of its long edge (which keeps a crease's
