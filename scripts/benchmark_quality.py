@@ -6,6 +6,8 @@
                                         [--face-handles 48] [--face-drags 4] [--moves 30] [--json PATH]
     python scripts/benchmark_quality.py --proxy-angles [--meshes ...] [--sizes 25000,300000] [--faces 1000]
                                         [--json PATH]
+    python scripts/benchmark_quality.py --repair-compare [--meshes ...] [--at-least 25000] [--faces 1000]
+                                        [--json PATH]
 
 Pose suite (bench/poses.py): random handle poses (axis random, up to 90 degrees, shift up to 10 %
 of the diagonal), each solved warm (from the previous pose, as dragging does) and cold at
@@ -33,6 +35,15 @@ armadillo (turned Z-up as the demo turns it): proxy faces, least and largest ang
 and how many have one under 1 degree or over 170, beside Blender's Decimate (collapse) of the same
 mesh to the same face count where the bpy module is there, and the goals (no angle under 1 degree,
 at most 1 % of faces under 10).
+
+Sliver repair on vs off (``--repair-compare``, in place of the above; issue 52): every mesh (those of
+the proxy triangles table by default) built twice, with the proxy's sliver repair (core/detached_surface/sliver_repair.py) and without it
+(``no_repair``), made as the bend makes them (``--at-least``; 0 keeps each at its size), beside thin
+rods (``rod-R``: a capped cylinder of radius R, length 4, 24 x 200 quads, 4,826 vertices) and a flat
+sheet (``sheet``: 60 x 60 quads, z = 0): build seconds (CPU time of the process, every thread's:
+the machine's other load moves it less than the clock; the best of two builds) and the repair's
+own, proxy faces against the target (and the build's stat saying why, under 95 %), slivers and
+least angle, and the bend's creases with the default solver (the held rig, as api.deform bends it).
 
 Rigs (``--rigs``, in place of the above; the bpy module; issue 43): the rigs artists build, on
 each mesh and proxy size (``--rig-faces``: a coarse proxy puts more of a selection's proxy faces
@@ -72,6 +83,7 @@ from bench.rigs import base, failed_goals, falloff, head, held_errors, limb, mak
 from bench.scenario import bend_scenario
 
 from skin_detach_addon.core import DualLaplacian, SkinDetachedSurface
+from skin_detach_addon.core.detached_surface import sliver_repair, surface as surface_module
 from skin_detach_addon.core.detached_surface.sliver_repair import face_angles
 from skin_detach_addon.core.detached_surface.seam_weights import SEAM_STEPS
 from skin_detach_addon.core.detached_surface.stretch import SkinStretch
@@ -79,15 +91,110 @@ from skin_detach_addon.core.detached_surface.stretch import SkinStretch
 MESHES = "armadillo,cow,spot,homer,alligator,cheburashka,horse,ogre,beetle-alt"
 RIG_MESHES = "armadillo,armadillo-300K"
 ANGLE_MESHES = "alligator,armadillo,bunny,cheburashka,cow,fandisk,homer,rocker-arm,spot,horse,ogre,beetle-alt"
+REPAIR_MESHES = ANGLE_MESHES + ",rod-0.02,rod-0.05,rod-0.1,sheet"
 
 
 def mesh(name, at_least):
     """A mesh of tests/data or bench/data (the unseen ones), flat-subdivided (4 ways) until it has
-    ``at_least`` vertices, positions rounded to float32 as Blender stores them."""
+    ``at_least`` vertices, positions rounded to float32 as Blender stores them; ``rod-R`` and
+    ``sheet`` are made (see :func:`made`) and kept as they are."""
+    if name.startswith("rod-") or name == "sheet":
+        return made(name)
     points, triangles = named(name)
     while points.shape[0] < at_least:
         points, triangles = subdivide(points, triangles, 4)
     return points.astype(np.float32).astype(np.float64), triangles
+
+
+def made(name):
+    """(points (n, 3), triangles (f, 3)) of ``rod-R`` (a capped cylinder along z of radius R, length
+    4: 24 vertices around, 200 quads along, a fan at each end) or ``sheet`` (60 x 60 quads over the
+    unit square, z = 0, each split along one diagonal)."""
+    if name == "sheet":
+        g = np.linspace(0.0, 1.0, 61)
+        gx, gy = np.meshgrid(g, g, indexing="ij")
+        points = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+        ids = np.arange(61 * 61).reshape(61, 61)
+        a, b, c, d = ids[:-1, :-1].ravel(), ids[1:, :-1].ravel(), ids[1:, 1:].ravel(), ids[:-1, 1:].ravel()
+        return points, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    radius, around, along, length = float(name[4:]), 24, 200, 4.0
+    angle = 2 * np.pi * np.arange(around) / around
+    ring = np.stack([radius * np.cos(angle), radius * np.sin(angle)], axis=1)
+    z = np.linspace(0.0, length, along + 1)
+    points = np.concatenate([np.column_stack([np.tile(ring, (along + 1, 1)), np.repeat(z, around)]),
+                             [[0.0, 0.0, 0.0], [0.0, 0.0, length]]])
+    ids = np.arange((along + 1) * around).reshape(along + 1, around)
+    a, b = ids[:-1], np.roll(ids[:-1], -1, axis=1)
+    c, d = ids[1:], np.roll(ids[1:], -1, axis=1)
+    low, high = points.shape[0] - 2, points.shape[0] - 1
+    return points.astype(np.float32).astype(np.float64), np.concatenate([
+        np.stack([a.ravel(), b.ravel(), d.ravel()], 1), np.stack([a.ravel(), d.ravel(), c.ravel()], 1),
+        np.stack([np.full(around, low), np.roll(ids[0], -1), ids[0]], 1),
+        np.stack([np.full(around, high), ids[-1], np.roll(ids[-1], -1)], 1)])
+
+
+def held_bend_creases(points, triangles, scenario, surface):
+    """The bend's creases (bench/quality.py) with the default solver on the held rig, as
+    api.deform bends it (``surface`` gets the detail's topology)."""
+    from bench.quality import creases
+    surface.attach_topology(triangles)
+    rig = scenario.held_rig(surface)
+    surface.seam_steps = SEAM_STEPS
+    solver = DualLaplacian(surface.proxy_vertices, surface.proxy_faces, rig["ids"], method="rotated",
+                           pulls=rig["pulls"])
+    result = solver.solve(rig["targets"], max_iter=500, tol=1e-12, pull_motions=rig["motions"])
+    detail = surface.reconstruct(result.vertices, groups=rig["groups"], held=rig["layout"].held)
+    return creases(points, detail, triangles)
+
+
+def repair_compare_rows(args):
+    """The sliver repair on vs off table (see the module): a row per mesh."""
+    print(f"## Sliver repair on vs off (proxy target {args.faces} faces, meshes at least {args.at_least:,} "
+          "vertices; build and repair: CPU seconds of this process, the best of two builds)\n")
+    print("| mesh | vertices | build s on / off | repair s | faces on / off | slivers on / off "
+          "| least angle on / off | creases on / off | short of target |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for name in [n for n in args.meshes.split(",") if n]:
+        points, triangles = mesh(name, args.at_least)
+        scenario = bend_scenario(points)
+        row = dict(mesh=name, vertices=int(points.shape[0]), target=args.faces)
+        for label, repair in (("on", sliver_repair.repair_slivers), ("off", sliver_repair.no_repair)):
+            spent = []
+
+            def timed(*a, repair=repair, spent=spent):
+                start = time.process_time()
+                out = repair(*a)
+                spent.append(time.process_time() - start)
+                return out
+            surface_module.repair_slivers = timed
+            try:
+                builds = []
+                for _ in range(2):
+                    start = time.process_time()
+                    surface = SkinDetachedSurface.build(points, triangles, target_faces=args.faces)
+                    builds.append(time.process_time() - start)
+            finally:
+                surface_module.repair_slivers = sliver_repair.repair_slivers
+            stats = surface.stats
+            row[label] = dict(build_s=min(builds), repair_s=min(spent), faces=stats["proxy_faces"],
+                              slivers=stats["proxy_slivers"], least=stats["proxy_least_angle"],
+                              short=stats["proxy_short_of_target"], angle_rows=stats["sliver_angle_rows"],
+                              passes=stats["sliver_passes"],
+                              creases=held_bend_creases(points, triangles, scenario, surface))
+        on, off = row["on"], row["off"]
+        rows.append(row)
+        print(f"| {name} | {row['vertices']:,} | {on['build_s']:.2f} / {off['build_s']:.2f} "
+              f"({on['build_s'] / off['build_s']:.2f}x) | {on['repair_s']:.3f} | {on['faces']} / {off['faces']} | "
+              f"{on['slivers']} / {off['slivers']} | {on['least']:.2f} / {off['least']:.2f} | "
+              f"{on['creases']} / {off['creases']} | {on['short'] or '-'} |", flush=True)
+    slower = max(r["on"]["build_s"] / r["off"]["build_s"] for r in rows)
+    kept = min(r["on"]["faces"] / r["target"] for r in rows)
+    worse = [r["mesh"] for r in rows if r["on"]["creases"] > r["off"]["creases"]]
+    print(f"\nslowest build with the repair {slower:.2f}x without; fewest faces {100 * kept:.1f} % of the target; "
+          f"creases on {sum(r['on']['creases'] for r in rows)} / off {sum(r['off']['creases'] for r in rows)}; "
+          f"more creases with the repair on {', '.join(worse) or 'no mesh'}")
+    return rows
 
 
 def seam_vertices(surface):
@@ -494,8 +601,17 @@ def main():
     parser.add_argument("--proxy-angles", action="store_true", help="the proxy triangles table instead of the "
                         "pose suite and the bend")
     parser.add_argument("--sizes", default="25000,300000", help="proxy angles: mesh sizes (vertices at least)")
+    parser.add_argument("--repair-compare", action="store_true", help="the sliver repair on vs off table "
+                        "instead of the pose suite and the bend")
     parser.add_argument("--json")
     args = parser.parse_args()
+    if args.repair_compare:
+        if args.meshes == MESHES:
+            args.meshes = REPAIR_MESHES
+        rows = repair_compare_rows(args)
+        if args.json:
+            report.save(args.json, {"repair_compare": rows})
+        return
     if args.proxy_angles:
         if args.meshes == MESHES:
             args.meshes = ANGLE_MESHES

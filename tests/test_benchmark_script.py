@@ -197,3 +197,24 @@ def test_riders_benchmark_measures_each_part_beside_blenders_stack(tmp_path):
     assert ours["bend"]["eye"]["offset"] < 0.5 * ours["bend"]["eye"]["moved"]  # it followed the head
     assert ours["handle_error"] <= 1e-5 and ours["anchor_error"] <= 1e-5
     assert run.stdout.count("| cow |") == 4 * len(rows)
+
+
+def test_quality_benchmark_repair_compare_option_builds_each_mesh_with_and_without_the_repair(tmp_path):
+    script = BENCHMARK.parent / "benchmark_quality.py"
+    run = subprocess.run([sys.executable, str(script), "--repair-compare", "--meshes", "cow,rod-0.05,sheet",
+                          "--at-least", "0", "--faces", "300", "--json", str(tmp_path / "r.json")],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "## Sliver repair on vs off" in run.stdout and "## Pose suite" not in run.stdout
+    assert "slowest build with the repair" in run.stdout and "more creases with the repair on" in run.stdout
+    rows = json.loads((tmp_path / "r.json").read_text())["rows"]["repair_compare"]
+    assert [r["mesh"] for r in rows] == ["cow", "rod-0.05", "sheet"]
+    assert [r["vertices"] for r in rows] == [2903, 4826, 3721]  # as they are (--at-least 0), rods and sheet made
+    for row in rows:
+        on, off = row["on"], row["off"]
+        assert row["target"] == 300 and on["build_s"] > 0 and off["build_s"] > 0 and on["repair_s"] >= 0
+        assert off["angle_rows"] == off["passes"] == 0 < on["angle_rows"]  # off: the proxy as simplified
+        assert on["least"] >= off["least"] and on["slivers"] <= off["slivers"]
+        assert on["faces"] >= 0.95 * 300 or on["short"]
+        assert on["creases"] >= 0 and off["creases"] >= 0
+        assert f"| {row['mesh']} | {row['vertices']:,} |" in run.stdout

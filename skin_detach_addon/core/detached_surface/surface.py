@@ -463,7 +463,7 @@ class SkinDetachedSurface:
             carrier = np.where(carrier >= 0, remap[np.maximum(carrier, 0)], -1)
             proxy_points, proxy_faces, refused = checked.points, checked.triangles, checked.refused
         # The collapses' needles and caps taken out: flipped, merged, their vertices moved.
-        proxy_points, proxy_faces, merged = repair_slivers(proxy_points, proxy_faces)
+        proxy_points, proxy_faces, merged, repaired = repair_slivers(proxy_points, proxy_faces, target)
         remap = merged[remap]
         carrier = np.where(carrier >= 0, merged[np.maximum(carrier, 0)], -1)
         mesh.cross = mesh.triangles = None  # binding needs points and normals only (the graph: the seams)
@@ -515,6 +515,7 @@ class SkinDetachedSurface:
             "normal_test_refused": int(refused),
             "proxy_least_angle": float(angles.min(initial=180.0)),
             "proxy_slivers": int(is_sliver(angles).sum()),
+            **repaired,
             "normal_disagree_bound": float(bound_share),
             "normal_disagree_ring": float(ring_share),
             "preview_vertices": 0 if preview is None else int(preview.points.shape[0]),
