@@ -125,7 +125,9 @@ def body_parts(points, triangles, kinds=("eye", "plate", "bracelet", "far")):
         along = offsets @ axis
         thin = np.abs(along) <= 0.01 * diag
         radial = np.linalg.norm(offsets[thin] - np.outer(along[thin], axis), axis=1)
-        parts["bracelet"] = torus(centre, axis, 1.08 * radial.max() + 0.008 * diag, 0.008 * diag)
+        # Hugging the arm: a little wider than most of the cross-section (a band slice catches
+        # stray vertices of a hand or a body far out, which the largest radius would follow).
+        parts["bracelet"] = torus(centre, axis, 1.05 * np.percentile(radial, 90) + 0.004 * diag, 0.006 * diag)
     if "far" in kinds:
         parts["far"] = cube(high + 0.2 * diag * np.ones(3) / np.sqrt(3.0), 0.04 * diag)
     return parts
