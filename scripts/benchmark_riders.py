@@ -64,7 +64,6 @@ def ours(name, points, triangles, ranges, scenario, faces, moves, separate):
     import bpy
     from mathutils import Matrix
 
-    from bench.views import AxisView
     from skin_detach_addon import api
     from skin_detach_addon.blender import mesh_io
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -103,16 +102,32 @@ def ours(name, points, triangles, ranges, scenario, faces, moves, separate):
     api.reset(owner)
     handle.matrix_world = Matrix(rest_world.tolist())
     bpy.context.view_layer.update()
-    # The drag: the mouse moves the handle's empty (G) by the scenario's shift in steps, seen along
-    # the shortest axis, as the modal operator runs it.
-    view = AxisView(-np.eye(3)[int(np.argmin(np.ptp(points, axis=0)))],
-                    scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
+    times, out["confirm_ms"] = drag_by_shift(owner, handle, scenario, points, moves)
+    dragged = read()
+    out["drag"] = follow_figures(points, dragged, triangles, ranges)
+    out["move_ms_median"] = float(np.median(times))
+    moved = np.array(handle.matrix_world) @ np.linalg.inv(rest_world)
+    expected = points[scenario.handle_ids] @ moved[:3, :3].T + moved[:3, 3]
+    out["drag_handle_error"] = float(np.abs(dragged[scenario.handle_ids] - expected).max()
+                                     / np.linalg.norm(np.ptp(points, axis=0)))
+    return out
+
+
+def drag_by_shift(owner, handle, scenario, points, moves):
+    """A drag as the modal operator runs it (api.DragSession): the mouse moves ``handle`` by the
+    scenario's shift in ``moves`` steps, seen along the shortest axis of ``points``, then Enter.
+    Returns (each move's ms, the confirm's ms)."""
+    import bpy
+
+    from bench.views import AxisView
+    from skin_detach_addon import api
+    extent = np.ptp(points, axis=0)
+    view = AxisView(-np.eye(3)[int(np.argmin(extent))], scale=float(np.linalg.norm(extent)) / 1000.0)
     origin = handle.matrix_world.to_translation()
     centre = np.array(view.to_screen(origin))
     target = np.array(view.to_screen(origin + type(origin)(scenario.shift.tolist())))
     session = api.DragSession(owner, handle, view, tuple(centre))
-    times = []
-    mouse = tuple(centre)
+    times, mouse = [], tuple(centre)
     for k in range(1, moves + 1):
         mouse = tuple(centre + (target - centre) * k / moves)
         start = time.perf_counter()
@@ -122,15 +137,7 @@ def ours(name, points, triangles, ranges, scenario, faces, moves, separate):
     start = time.perf_counter()
     session.event("RET", "PRESS", mouse)
     bpy.context.view_layer.update()
-    out["confirm_ms"] = 1000 * (time.perf_counter() - start)
-    dragged = read()
-    out["drag"] = follow_figures(points, dragged, triangles, ranges)
-    out["move_ms_median"] = float(np.median(times))
-    moved = np.array(handle.matrix_world) @ np.linalg.inv(rest_world)
-    expected = points[scenario.handle_ids] @ moved[:3, :3].T + moved[:3, 3]
-    out["drag_handle_error"] = float(np.abs(dragged[scenario.handle_ids] - expected).max()
-                                     / np.linalg.norm(np.ptp(points, axis=0)))
-    return out
+    return times, 1000 * (time.perf_counter() - start)
 
 
 def _local(triangles, ids):
@@ -216,7 +223,6 @@ def several_objects(size, faces, moves):
     from mathutils import Matrix
 
     from bench.meshes import armadillo
-    from bench.views import AxisView
     from skin_detach_addon import api
     from skin_detach_addon.blender import mesh_io
     body_points, body_triangles = armadillo(size)
@@ -258,22 +264,8 @@ def several_objects(size, faces, moves):
             api.reset(owner)
             handle.matrix_world = Matrix(rest_world.tolist())
             bpy.context.view_layer.update()
-            view = AxisView(-np.eye(3)[int(np.argmin(extent))], scale=float(np.linalg.norm(extent)) / 1000.0)
-            origin = handle.matrix_world.to_translation()
-            centre_px = np.array(view.to_screen(origin))
-            target = np.array(view.to_screen(origin + type(origin)(scenario.shift.tolist())))
-            session = api.DragSession(owner, handle, view, tuple(centre_px))
-            times, mouse = [], tuple(centre_px)
-            for k in range(1, moves + 1):
-                mouse = tuple(centre_px + (target - centre_px) * k / moves)
-                start = time.perf_counter()
-                session.event("MOUSEMOVE", "NOTHING", mouse)
-                bpy.context.view_layer.update()
-                times.append(1000 * (time.perf_counter() - start))
-            start = time.perf_counter()
-            session.event("RET", "PRESS", mouse)
-            bpy.context.view_layer.update()
-            out.update(confirm_ms=1000 * (time.perf_counter() - start), move_ms_median=float(np.median(times)),
+            times, confirm_ms = drag_by_shift(owner, handle, scenario, points, moves)
+            out.update(confirm_ms=confirm_ms, move_ms_median=float(np.median(times)),
                        move_ms_p95=float(np.percentile(times, 95)))
     out["build_ratio"] = out["build_separate_s"] / out["build_joined_s"]
     out["separate_vs_joined_diag"] = float(np.abs(bent["separate"] - bent["joined"]).max() / diag)
