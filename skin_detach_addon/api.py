@@ -266,7 +266,7 @@ def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False, follow=Fals
     bpy.context.view_layer.update()  # world matrices of handles moved by a script
     deformation = Deformation(obj, preserve_volume)
     if preview and deformation.preview is not None:
-        return dict(deformation.preview_step(tol, follow=follow, budget_ms=None).figures(), preview=True)
+        return dict(deformation.preview_step(tol, follow=follow, budget=None).figures(), preview=True)
     return dict(deformation.step(tol, follow=follow).figures(), preview=False)
 
 
