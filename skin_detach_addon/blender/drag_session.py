@@ -318,6 +318,18 @@ class DragSession:
         return CANCELLED
 
 
+def dragged(obj):
+    """Whether a drag of one of ``obj``'s handles is running (between its start and its confirm or
+    cancel): its poses are the drag's own, which live update leaves alone."""
+    for session in list(_RUNNING):
+        try:
+            if session.obj == obj:
+                return True
+        except ReferenceError:  # its objects went with a file loaded during the drag
+            _RUNNING.discard(session)
+    return False
+
+
 def before_save():
     """A file is about to be written: every running drag that writes the mesh as it goes
     records the positions it wrote (with the transform they were written under), so the file
