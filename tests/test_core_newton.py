@@ -334,3 +334,46 @@ def test_a_proxy_with_every_vertex_constrained_solves_at_once_within_any_budget(
     solver = DualLaplacian(points, tris, np.arange(points.shape[0]))
     result = solver.solve(points + 1.0, budget_units=12)
     assert result.converged and np.array_equal(result.vertices, points + 1.0)
+
+
+def test_a_move_far_from_its_path_catches_up_past_its_budget_within_the_overrun(spot_proxy, monkeypatch):
+    """A drag move (budgeted, not idle) whose Newton steps still move a vertex by more than
+    CATCH_UP_STEP of the diagonal goes on past its budget, up to CATCH_UP_OVERRUN times it: the
+    shown shape crosses a snap of the path with the moves, not in the settle after them; a settle
+    slice (idle) keeps to its budget; counted in units, whatever the clock."""
+    from skin_detach_addon.core.proxy_solve import projected_newton
+    from skin_detach_addon.core.proxy_solve.projected_newton import CATCH_UP_OVERRUN, CATCH_UP_STEP
+    points, tris = spot_proxy
+    ids, targets = bend(points)
+    start = points.copy()
+    start[ids] = points[ids] + 0.8 * (targets - points[ids])   # the moves lag far behind the handles
+    spent = []
+    real = projected_newton.minimise
+
+    def counted(*args, **kwargs):
+        result = real(*args, **kwargs)
+        spent.append(args[8].spent if len(args) > 8 else kwargs["budget"].spent)
+        return result
+
+    monkeypatch.setattr(projected_newton, "minimise", counted)
+    import skin_detach_addon.core.proxy_solve.dual_laplacian as dual_laplacian
+    monkeypatch.setattr(dual_laplacian, "minimise", counted)
+
+    def solve(idle, catch_up=True):
+        spent.clear()
+        with monkeypatch.context() as patch:
+            if not catch_up:
+                patch.setattr(projected_newton, "CATCH_UP_STEP", 1e9)
+            solver = DualLaplacian(points, tris, ids)
+            result = solver.solve(targets, initial=start, max_iter=100, tol=1e-12, budget_units=12, idle=idle)
+        return result, spent[-1]
+
+    caught, caught_units = solve(idle=False)
+    kept, kept_units = solve(idle=False, catch_up=False)
+    sliced, sliced_units = solve(idle=True)
+    cold = DualLaplacian(points, tris, ids).solve(targets, max_iter=100, tol=1e-12).vertices
+    assert kept.history and np.sqrt(max(kept.history)) > CATCH_UP_STEP   # the first step was long
+    assert caught.iterations > kept.iterations and caught_units > kept_units
+    assert caught_units <= (1 + CATCH_UP_OVERRUN) * 12 + 12 * 8           # within the overrun (+ one CG overrun)
+    assert np.abs(caught.vertices - cold).max() < np.abs(kept.vertices - cold).max()
+    assert sliced.iterations <= kept.iterations + 1                        # a settle slice keeps its budget

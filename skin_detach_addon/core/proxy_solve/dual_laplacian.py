@@ -488,6 +488,7 @@ class DualLaplacian:
         ``budget``: the :class:`.work_budget.WorkBudget` of the solve or None; ``work`` counts the
         work done (``budget`` itself when there is one)."""
         pulled = self.n_pulls > 0
+        catch_up = budget is not None and not refresh  # a drag's move (see projected_newton.minimise)
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         if jump > WARM_LIMIT:
             # Too far for the guess to say which stationary point is meant: start from rest, so the
@@ -502,7 +503,7 @@ class DualLaplacian:
             if pulled:
                 self.energy_terms.set_motions([np.eye(4) + (stage / stages) * (motion - np.eye(4)) for motion in motions])
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter, work, self._lagged, refresh)
+                              STAGE_TOL, max_iter, work, self._lagged, refresh, catch_up)
             points = staged.points
             if budget is not None and not staged.converged:
                 # Out of budget: the handles where they belong, the rest where the stages got to; the
@@ -514,7 +515,7 @@ class DualLaplacian:
         if pulled:
             self.energy_terms.set_motions(motions)
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
-                          max_iter, work, self._lagged, refresh)
+                          max_iter, work, self._lagged, refresh, catch_up)
         return DualLaplacianResult(result.points, result.iterations, result.converged,
                                    self.volume_change(result.points), result.history, result.energy)
 

@@ -51,6 +51,12 @@ class WorkBudget:
         """Whether the budget is spent."""
         return self.spent >= self.units
 
+    def make_room(self, units, most):
+        """Raise the budget so that ``units`` more fit, to at most ``most`` units in all; whether
+        they fit now."""
+        self.units = max(self.units, min(self.spent + units, int(most)))
+        return not self.would_pass(units)
+
     def past(self, overrun):
         """Whether more than ``overrun`` times the budget has been spent beyond it."""
         return self.spent > (1.0 + overrun) * self.units
