@@ -377,3 +377,18 @@ def test_a_move_far_from_its_path_catches_up_past_its_budget_within_the_overrun(
     assert caught_units <= (1 + CATCH_UP_OVERRUN) * 12 + 12 * 8           # within the overrun (+ one CG overrun)
     assert np.abs(caught.vertices - cold).max() < np.abs(kept.vertices - cold).max()
     assert sliced.iterations <= kept.iterations + 1                        # a settle slice keeps its budget
+
+
+def test_a_refresh_that_cannot_factor_waits_for_the_next_long_step_before_trying_again():
+    """At a saddle H is indefinite and the settle's refresh makes no factor: it costs the factor's
+    work all the same, so it is not tried again at the start of every slice (the ogre's settle
+    spent 30 of each slice's 32 units on it) but after the next Newton step that needs more than
+    REFRESH_STEPS conjugate-gradient steps."""
+    from types import SimpleNamespace
+    from skin_detach_addon.core.proxy_solve.projected_newton import REFRESH_STEPS
+    tries = []
+    indefinite = SimpleNamespace(factor=lambda state: tries.append(state))  # always None: not definite
+    lagged = LaggedHessian(indefinite, "rest")
+    lagged.steps = REFRESH_STEPS + 5
+    assert lagged.refresh("saddle") is False and lagged.steps == 0 and lagged.solver("saddle") is None
+    assert tries == ["rest", "saddle"]
