@@ -1,7 +1,7 @@
 """The modal drag as an artist feels it, beside Blender's own stack on the same mesh.
 
-    python scripts/benchmark_drag.py [--meshes horse,ogre,beetle-alt,cow,cheburashka,armadillo,bunny,rocker-arm,
-                                               armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150]
+    python scripts/benchmark_drag.py [--meshes horse,ogre,beetle-alt,beast,nefertiti,cow,cheburashka,armadillo,
+                                               bunny,rocker-arm,armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150]
                                               [--busy] [--busy-rest-ms 300] [--json PATH]
 
 Meshes: tests/data's (the shared ones) and bench/data's, which the project was not tuned on (see
@@ -311,8 +311,8 @@ def busy_line(row):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--meshes", default="horse,ogre,beetle-alt,cow,cheburashka,armadillo,bunny,rocker-arm,"
-                                            "armadillo-300K")
+    parser.add_argument("--meshes", default="horse,ogre,beetle-alt,beast,nefertiti,cow,cheburashka,armadillo,bunny,"
+                                            "rocker-arm,armadillo-300K")
     parser.add_argument("--faces", default="1000")
     parser.add_argument("--moves", type=int, default=60)
     parser.add_argument("--rest-ms", type=float, default=150.0)
