@@ -1,12 +1,17 @@
 """The modal drag as an artist feels it, beside Blender's own stack on the same mesh.
 
-    python scripts/benchmark_drag.py [--meshes horse,ogre,beetle-alt,cow,cheburashka,armadillo,bunny,rocker-arm,
-                                               armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150]
+    python scripts/benchmark_drag.py [--meshes horse,ogre,beetle-alt,beast,nefertiti,cow,cheburashka,armadillo,
+                                               bunny,rocker-arm,armadillo-300K] [--faces 1000] [--moves 60] [--rest-ms 150]
                                               [--busy] [--busy-rest-ms 300] [--json PATH]
 
 Meshes: tests/data's (the shared ones) and bench/data's, which the project was not tuned on (see
 bench/data/README.md: a horse with thin legs, a multi-part ogre of 44 components, a car body of
-Euler characteristic -9). Rows print as
+Euler characteristic -9, a thin-limbed horned beast, a 50K bust). The add-on runs as an artist
+has it: registered (``skin_detach_addon.register()``: live update's depsgraph and frame handlers,
+the save and load handlers) with Live Update on, and after every event the script does what the modal operator and
+Blender do after it (:func:`after_event`: live update told the pose is the drag's, the depsgraph
+evaluated, a live-update timer it queued run; ``live_update_runs`` counts those, 0 expected).
+Rows print as
 they are measured; then the table again, the worst case first (by how far its worst figure is past
 its goal), each row naming the goals it fails.
 
@@ -30,8 +35,8 @@ then confirms. Figures:
   did not find a solution": then only the hooked part moves, its step is a no-op's cost and no
   ratio is given), and our p95 over its p95.
 
-Goals (issue 36): release pop <= 2e-3 of the diagonal, tracking median <= 5e-3 of the diagonal,
-path ratio 0.8-1.3, confirm <= 150 ms, our move p95 <= 1.5x the stack's.
+Goals (issues 36, 53): release pop <= 2e-3 of the diagonal, tracking median <= 3e-3 of the
+diagonal, path ratio 0.8-1.3, confirm <= 150 ms, our move p95 <= 1.5x the stack's.
 
 ``--busy`` (issue 44: an artist's Blender draws, other programs run): after each mesh's row the
 same drag again with one core kept busy by a separate process (a Python busy loop, started before
@@ -63,8 +68,10 @@ from bench.meshes import blender_mesh, named, subdivide, subdivided  # noqa: E40
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
 
+import skin_detach_addon  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.blender import mesh_io  # noqa: E402
+from skin_detach_addon.ui import live_update  # noqa: E402
 
 RADIUS_PX = 100.0
 #: Meshes smaller than this are flat-subdivided (4 ways) until they reach it.
@@ -73,7 +80,7 @@ AT_LEAST = 25_000
 #: Goal name -> (figure of a row, how far past its goal: <= 1 meets it).
 GOALS = {
     "pop": lambda row: row["release_pop"] / 2e-3,
-    "tracking": lambda row: row["tracking_median"] / 5e-3,
+    "tracking": lambda row: row["tracking_median"] / 3e-3,
     "path": lambda row: max(row["path_ratio"] / 1.3, 0.8 / max(row["path_ratio"], 1e-300)),
     "confirm": lambda row: row["confirm_ms"] / 150.0,
     "p95": lambda row: (row["move_ms_p95"] / row["stack"]["step_ms_p95"] / 1.5
@@ -117,11 +124,24 @@ def turn_matrix(axis, pivot, angle):
 def rigged(name, points, triangles, faces):
     """A fresh scene with the mesh bound to a ``faces`` proxy, the scenario's anchor and handle."""
     bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.context.scene.skin_detach.live_update = True  # its handlers watch every move (see after_event)
     obj = blender_mesh(name, points, triangles)
     api.build(obj, target_faces=faces)
     scenario = bend_scenario(points)
     api.add_anchor(obj, scenario.anchor_ids)
     return obj, api.add_handle(obj, scenario.handle_ids), scenario
+
+
+def after_event(obj, counts):
+    """What follows a drag's event in Blender: the modal operator takes the pose as live update's
+    (``live_update.remember``), the depsgraph is evaluated (its handlers run: live update
+    notices), and a timer live update queued runs (in a window it would, before the next event):
+    ``counts["live_update"]`` counts those runs (none expected: the drag solved the pose itself)."""
+    live_update.remember(obj)
+    bpy.context.view_layer.update()
+    if live_update.pending():
+        counts["live_update"] += 1
+        live_update.flush()
 
 
 def shown(obj):
@@ -171,7 +191,13 @@ def our_drag(name, points, triangles, faces, moves, rest_ms, busy=False):
     rest = points.astype(np.float32).astype(np.float64)
     ratio = path_length(frames, rest) / max(path_length(converged, rest), 1e-300)
     return dict(figures, tracking_median=float(np.median(errors)), tracking_max=float(np.max(errors)),
-                path_ratio=ratio, load=load), scenario
+                path_ratio=ratio, load=load, registered=registered()), scenario
+
+
+def registered():
+    """Whether the add-on runs as an artist has it: registered, live update's handler installed."""
+    return hasattr(bpy.types.Scene, "skin_detach") and any(
+        getattr(h, "__module__", "").startswith("skin_detach_addon") for h in bpy.app.handlers.depsgraph_update_post)
 
 
 def view_axis(points):
@@ -188,15 +214,19 @@ def _drag(obj, handle, points, moves, rest_ms):
     view = AxisView(-axis, scale=float(np.linalg.norm(np.ptp(points, axis=0))) / 1000.0)
     centre = np.array(view.to_screen(handle.matrix_world.to_translation()))
     start = tuple(centre + (RADIUS_PX, 0.0))
+    bpy.context.view_layer.update()
+    live_update.flush()  # what the build and the new handles queued, as its timer runs before a drag
     session = api.DragSession(obj, handle, view, start, preview_above=None)
+    counts = {"live_update": 0}
     session.event("R", "PRESS", start)
+    after_event(obj, counts)
     times, unconverged, frames, matrices = [], 0, [], []
     for k in range(1, moves + 1):
         angle = math.radians(90.0) * k / moves
         mouse = tuple(centre + RADIUS_PX * np.array((math.cos(angle), math.sin(angle))))
         begun = time.perf_counter()
         session.event("MOUSEMOVE", "NOTHING", mouse)
-        bpy.context.view_layer.update()
+        after_event(obj, counts)
         times.append(1000 * (time.perf_counter() - begun))
         unconverged += not session.last.converged
         frames.append(shown(obj))
@@ -204,7 +234,7 @@ def _drag(obj, handle, points, moves, rest_ms):
     timers, settle_ms, begun = 0, None, time.perf_counter()
     while time.perf_counter() - begun < rest_ms / 1000.0:
         session.event("TIMER", "NOTHING", mouse)
-        bpy.context.view_layer.update()
+        after_event(obj, counts)
         if settle_ms is None:
             timers += 1
             if session.settled:
@@ -213,7 +243,7 @@ def _drag(obj, handle, points, moves, rest_ms):
     rested = shown(obj)
     begun = time.perf_counter()
     session.event("LEFTMOUSE", "PRESS", mouse)
-    bpy.context.view_layer.update()
+    after_event(obj, counts)
     confirm_ms = 1000 * (time.perf_counter() - begun)
     written = shown(obj)
     diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
@@ -223,7 +253,8 @@ def _drag(obj, handle, points, moves, rest_ms):
         "proxy_faces": proxy_faces, "move_ms_median": float(np.median(times)), "move_ms_p95": percentile(times, 95),
         "move_ms_max": float(np.max(times)), "unconverged_moves": int(unconverged), "settle_slices": timers,
         "settle_ms": settle_ms, "settled": settled, "confirm_ms": confirm_ms,
-        "confirm_converged": bool(session.last.converged), "release_pop": pop}
+        "confirm_converged": bool(session.last.converged), "release_pop": pop,
+        "live_update_runs": counts["live_update"]}
 
 
 def stack_drag(points, triangles, faces, axis, scenario, moves):
@@ -280,8 +311,8 @@ def busy_line(row):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--meshes", default="horse,ogre,beetle-alt,cow,cheburashka,armadillo,bunny,rocker-arm,"
-                                            "armadillo-300K")
+    parser.add_argument("--meshes", default="horse,ogre,beetle-alt,beast,nefertiti,cow,cheburashka,armadillo,bunny,"
+                                            "rocker-arm,armadillo-300K")
     parser.add_argument("--faces", default="1000")
     parser.add_argument("--moves", type=int, default=60)
     parser.add_argument("--rest-ms", type=float, default=150.0)
@@ -290,11 +321,19 @@ def main():
     parser.add_argument("--busy-rest-ms", type=float, default=300.0)
     parser.add_argument("--json")
     args = parser.parse_args()
-    # The add-on's API is driven unregistered: bpy 4.2's module crashed on exit (SIGSEGV) once the
-    # add-on had been registered, unregistered or not.
+    # The add-on as an artist has it: registered, its handlers (live update, saving, idle
+    # preparation) installed; every event is followed by what the modal operator and Blender do
+    # after it (see :func:`after_event`).
+    skin_detach_addon.register()
     rows = measure(args)
     if args.json:
         report.save(args.json, rows)
+    if bpy.app.version[:2] == (4, 2):
+        # bpy 4.2's module crashes at interpreter exit once the add-on was registered (its
+        # live-update toggle's update callback; tests/conftest.py): end here, the output written.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
 
 
 def measure(args):

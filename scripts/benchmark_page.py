@@ -71,7 +71,7 @@ def drag_section(data):
     busy_part = ("\n### With one core busy\n\nThe same drag again right after each row above, a separate process "
                  "keeping one core busy (a Python busy loop) from before the session opens until the confirm is "
                  "measured, and the rest longer (the command's `--busy-rest-ms`); the load is the 1-minute load "
-                 "average when the row began (the machine's other work). Goals: tracking median <= 5e-3, path "
+                 "average when the row began (the machine's other work). Goals: tracking median <= 3e-3, path "
                  "0.8-1.3, pop <= 2e-3, confirm <= 150 ms; rows worst first.\n\n" +
                  table(busy, sorted(busy_rows, key=lambda r: -r["busy"]["worst"]))) if busy_rows else ""
     return ("## The modal drag beside Blender's stack\n\n"
@@ -80,10 +80,10 @@ def drag_section(data):
             "transforms through `api.deform(follow=True)`); path ratio: shown path length over converged; pop: the "
             "jump between the mesh after the rest and after the confirm. Blender's stack is Decimate to the same face "
             "count + Hook + Laplacian Deform + Surface Deform, stepped through the same turn in the same process (no "
-            "ratio where its Laplacian Deform found no solution). Goals: pop <= 2e-3, tracking median <= 5e-3, path "
+            "ratio where its Laplacian Deform found no solution). Goals: pop <= 2e-3, tracking median <= 3e-3, path "
             "0.8-1.3, confirm <= 150 ms, our p95 <= 1.5x the stack's; rows worst first, each naming the goals it "
-            "fails. horse, ogre and beetle-alt (bench/data) are meshes the drag was not tuned on. Load: the "
-            "1-minute load average when the row began (the machine's other work; 2 cores).\n\n" + heading(data["meta"]) + "\n" +
+            "fails. horse, ogre, beetle-alt, beast and nefertiti (bench/data) are meshes the drag was not tuned "
+            "on. Load: the 1-minute load average when the row began (the machine's other work; 2 cores).\n\n" + heading(data["meta"]) + "\n" +
             table(columns, data["rows"]) + busy_part)
 
 

@@ -141,7 +141,7 @@ def blender_drag(obj, handle, scenario, steps):
     from mathutils import Matrix
 
     from skin_detach_addon.blender.deformation import Deformation
-    from skin_detach_addon.core.proxy_solve.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL
+    from skin_detach_addon.core.proxy_solve.proxy_solves import DRAG_BUDGET_UNITS, DRAG_TOL
     deformation = Deformation(obj)
     rest_world = np.array(handle.matrix_world)
     times = []
@@ -149,7 +149,7 @@ def blender_drag(obj, handle, scenario, steps):
         handle.matrix_world = Matrix((scenario.motion(k / steps) @ rest_world).tolist())
         start = time.perf_counter()
         bpy.context.view_layer.update()
-        deformation.step(DRAG_TOL, mark=False, follow=True, budget_ms=DRAG_BUDGET_MS)
+        deformation.step(DRAG_TOL, mark=False, follow=True, budget=DRAG_BUDGET_UNITS)
         bpy.context.view_layer.update()
         times.append(time.perf_counter() - start)
     with stretch_timer() as spent:

@@ -36,7 +36,7 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "set_parts", "part_overrides", "is_rig_part", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "moved_matrix", "mirror_twin",
+           "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "is_dragged", "moved_matrix", "mirror_twin",
            "handle_mirror", "members", "member_ranges", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
@@ -316,7 +316,7 @@ def deform(obj, preserve_volume=True, tol=SETTLE_TOL, preview=False, follow=Fals
     bpy.context.view_layer.update()  # world matrices of handles moved by a script
     deformation = Deformation(obj, preserve_volume)
     if preview and deformation.preview is not None:
-        return dict(deformation.preview_step(tol, follow=follow, budget_ms=None).figures(), preview=True)
+        return dict(deformation.preview_step(tol, follow=follow, budget=None).figures(), preview=True)
     return dict(deformation.step(tol, follow=follow).figures(), preview=False)
 
 
@@ -343,6 +343,11 @@ def clear_orphan(obj):
     """Remove what is left of a deleted mesh's rig, given any part ``obj`` of it; returns the
     deleted mesh's name."""
     return skin_rig.clear_orphan(obj)
+
+
+def is_dragged(obj):
+    """Whether a drag (:class:`DragSession`) of a handle of the bound ``obj`` is running."""
+    return drag_session.dragged(obj)
 
 
 def before_save():

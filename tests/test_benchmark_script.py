@@ -128,6 +128,7 @@ def test_drag_benchmark_busy_option_spins_a_core_beside_each_drag_and_saves_a_bu
     for figures in (quiet, busy):
         assert figures["move_ms_median"] > 0 and figures["tracking_median"] >= 0 and figures["path_ratio"] > 0
         assert figures["load"] >= 0 and figures["release_pop"] >= 0 and figures["confirm_ms"] > 0
+        assert figures["registered"] and figures["live_update_runs"] == 0  # as an artist has it; live update keeps out
     assert "stack" not in busy and set(busy["fails"]) <= {"pop", "tracking", "path", "confirm"}
     assert busy["worst"] > 0
     bad = {path: value for path, value in numbers(row) if not math.isfinite(value)}

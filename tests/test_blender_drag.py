@@ -235,7 +235,7 @@ def _quick_turn(monkeypatch):
     """(obj, session) after a quick R turn of spot's handle in moves that stop after one Newton
     iteration each, as on a large proxy (the first always runs): the moves cannot keep up."""
     from skin_detach_addon.blender import drag_session
-    monkeypatch.setattr(drag_session, "DRAG_BUDGET_MS", 1e-6)
+    monkeypatch.setattr(drag_session, "DRAG_BUDGET_UNITS", 1)
     obj = import_spot()
     handle = rig(obj, axis=1)
     session = DragSession(obj, handle, TopView(0.01), (0, 0))
@@ -272,7 +272,7 @@ def test_a_drag_confirmed_before_it_settled_is_settled_by_the_confirm(scene, mon
 
 def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_restores_bit_exact(scene, monkeypatch):
     from skin_detach_addon.blender import drag_session
-    monkeypatch.setattr(drag_session, "DRAG_BUDGET_MS", 1e-6)
+    monkeypatch.setattr(drag_session, "DRAG_BUDGET_UNITS", 1)
     obj = import_spot()
     handle = rig(obj, axis=1)
     before = _state(obj)
@@ -286,55 +286,104 @@ def test_timer_events_before_any_move_do_nothing_and_cancel_after_a_settle_resto
     _same(_state(obj), before)
 
 
-def test_a_busy_machine_shows_the_same_drag_later_not_another_one(scene, monkeypatch):
-    """The moves' and the settle's budgets count work: a wall clock that runs 1,000 times fast (another
-    program taking the core between reads) changes no shown shape, where it cut every move short."""
+def _slow_clocks(patch, factor):
+    """Every clock the add-on could read runs ``factor`` times slower and jumps on every read (a
+    slower machine, another program taking the core between reads)."""
     import time
+    for name in ("perf_counter", "thread_time", "process_time", "monotonic", "time"):
+        real, ticks = getattr(time, name), iter(range(1, 1 << 40))
+        patch.setattr(time, name, lambda real=real, ticks=ticks: factor * real() + next(ticks) * 1e-3)
+
+
+def _benchmark_drag():
+    import pathlib
+    import sys
+    scripts = str(pathlib.Path(__file__).resolve().parent.parent / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        import benchmark_drag
+    finally:
+        sys.path.remove(scripts)
+    return benchmark_drag
+
+
+def test_the_same_events_show_the_same_shapes_with_a_core_busy_and_every_clock_ten_times_slower(scene, monkeypatch):
+    """A drag's shown shapes are a function of its events: a scan (beast, thin limbs, 32K, not
+    subdivided) turned by R in 20 moves, then 6 TIMER events (the settle), once quiet and once
+    with a process spinning on a core and every clock ten times slower: bit for bit the same
+    after every move and every slice (the moves' budgets were milliseconds turned into units at
+    the measured CPU time per unit: a busy or slow machine did fewer)."""
+    import math
+    from bench.views import AxisView
+    bench = _benchmark_drag()
+    points, triangles = bench.mesh("beast")
+    axis = bench.view_axis(points)
+    size = float(np.linalg.norm(np.ptp(points, axis=0)))
 
     def drag(busy):
-        with monkeypatch.context() as patch:
-            reads = iter(range(1, 1 << 30))
-            patch.setattr(time, "thread_time", lambda: next(reads) * 1e-4)  # the same CPU clock both times
-            bpy.ops.wm.read_homefile(use_empty=True)
-            obj = import_spot()
-            handle = rig(obj, axis=1)
+        with monkeypatch.context() as patch, bench.spinning(busy):
             if busy:
-                real = time.perf_counter
-                patch.setattr(time, "perf_counter", lambda: 1000.0 * real())
-            session = DragSession(obj, handle, TopView(0.01), (0, 0))
-            session.event("R", "PRESS", (0, 0))
+                _slow_clocks(patch, 10.0)
+            obj, handle, _ = bench.rigged("beast", points, triangles, 1000)
+            view = AxisView(-axis, scale=size / 1000.0)
+            centre = np.array(view.to_screen(handle.matrix_world.to_translation()))
+            start = tuple(centre + (100.0, 0.0))
+            session = DragSession(obj, handle, view, start, preview_above=None)
+            session.event("R", "PRESS", start)
             shown = []
-            for k in range(1, 7):
-                session.event("MOUSEMOVE", "NOTHING", (-30 * k, 100))
+            for k in range(1, 21):
+                angle = math.radians(90.0) * k / 60
+                mouse = tuple(centre + 100.0 * np.array((math.cos(angle), math.sin(angle))))
+                session.event("MOUSEMOVE", "NOTHING", mouse)
                 shown.append(mesh_io.read_positions(obj.data).copy())
-            for _ in range(3):
-                session.event("TIMER", "NOTHING", (-180, 100))
+            for _ in range(6):
+                session.event("TIMER", "NOTHING", mouse)
                 shown.append(mesh_io.read_positions(obj.data).copy())
-            assert session.event("ESC", "PRESS", (-180, 100)) == CANCELLED
+            assert session.event("ESC", "PRESS", mouse) == CANCELLED
         return shown
 
     quiet, busy = drag(False), drag(True)
-    assert all(np.array_equal(a, b) for a, b in zip(quiet, busy))
+    assert len(quiet) == len(busy) == 26
+    assert np.abs(quiet[19] - points).max() > 0.01 * size  # it moved
+    for k, (a, b) in enumerate(zip(quiet, busy)):
+        assert np.array_equal(a, b), f"shown shape {k} differs by {np.abs(a - b).max() / size:.1e} of the diagonal"
 
 
-def test_on_a_machine_fifty_times_slower_the_drag_still_settles_and_confirms_what_it_showed(scene, monkeypatch):
-    import time
-    obj = import_spot()
-    handle = rig(obj, axis=1)
-    real = time.thread_time
-    monkeypatch.setattr(time, "thread_time", lambda: 50.0 * real())  # every unit of work costs 50 times the CPU
-    session = DragSession(obj, handle, TopView(0.01), (0, 0))
-    session.event("R", "PRESS", (0, 0))
-    for k in range(1, 9):
-        session.event("MOUSEMOVE", "NOTHING", (-20 * k, 100))
-    for slices in range(1, 400):
-        session.event("TIMER", "NOTHING", (-160, 100))
-        if session.settled:
-            break
-    assert session.settled and slices > 1                    # less per slice, and still settled
-    shown = mesh_io.read_positions(obj.data).copy()
-    assert session.event("LEFTMOUSE", "PRESS", (-160, 100)) == FINISHED
-    assert np.array_equal(mesh_io.read_positions(obj.data), shown)
+def test_a_slower_clock_changes_no_budget_and_the_drag_settles_and_confirms_what_it_showed(scene, monkeypatch):
+    from skin_detach_addon.core.proxy_solve import dual_laplacian
+    units = []
+
+    class Recorded(dual_laplacian.WorkBudget):  # every budget a solve is given, in units
+        def __init__(self, n):
+            super().__init__(n)
+            units.append(n)
+
+    monkeypatch.setattr(dual_laplacian, "WorkBudget", Recorded)
+
+    def drag(factor):
+        units.clear()
+        with monkeypatch.context() as patch:
+            bpy.ops.wm.read_homefile(use_empty=True)
+            obj = import_spot()
+            handle = rig(obj, target_faces=1000, axis=1)
+            _slow_clocks(patch, factor)
+            session = DragSession(obj, handle, TopView(0.01), (0, 0))
+            session.event("R", "PRESS", (0, 0))
+            for k in range(1, 5):
+                session.event("MOUSEMOVE", "NOTHING", (-40 * k, 100))
+            for slices in range(1, 400):
+                session.event("TIMER", "NOTHING", (-160, 100))
+                if session.settled:
+                    break
+            assert session.settled
+            shown = mesh_io.read_positions(obj.data).copy()
+            assert session.event("LEFTMOUSE", "PRESS", (-160, 100)) == FINISHED
+            assert np.array_equal(mesh_io.read_positions(obj.data), shown)  # no pop
+        return shown, slices, list(units)
+
+    quiet, slow = drag(1.0), drag(10.0)
+    assert quiet[1] > 1 and len(quiet[2]) > 5                 # moves and several slices, every one budgeted
+    assert np.array_equal(quiet[0], slow[0]) and quiet[1] == slow[1] and quiet[2] == slow[2]
 
 
 def test_a_moves_start_never_carries_a_vertex_farther_than_the_handles_move():

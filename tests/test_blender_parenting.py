@@ -259,3 +259,33 @@ def test_handles_of_an_earlier_version_are_migrated_once_with_their_world_matric
     assert bpy.ops.object.parent_set(type='OBJECT') == {'FINISHED'}
     assert_still(obj, hand, hand_world, local(obj), "Ctrl+P after the migration")
     activate(obj)
+
+
+def test_live_update_keeps_out_of_a_drag_whose_moves_evaluate_the_depsgraph(scene):
+    """Live Update on, the forearm's empty dragged with the hand's parented to it: every move
+    evaluates the depsgraph (the hand's world matrix), whose handler used to queue a live-update
+    solve of the pose before the operator took it as the drag's; in a window its timer then ran
+    between moves when it happened to fire first (a settled solve in the drag's warm start: the
+    next moves continued from another iterate). A running drag's object is never queued."""
+    from skin_detach_addon.ui import live_update
+    obj, forearm, hand, parts = rigged(IMPORTS["OBJ import (rotation X 90)"])
+    select_and_make_active(hand, forearm)
+    assert bpy.ops.object.parent_set(type='OBJECT') == {'FINISHED'}
+    bpy.context.scene.skin_detach.live_update = True
+    bpy.context.view_layer.update()
+    live_update.flush()
+    live_update.remember(obj)
+    view = TopView(world_size(obj) / 1000.0)
+    centre = np.array(view.to_screen(forearm.matrix_world.to_translation()))
+    session = DragSession(obj, forearm, view, tuple(centre))
+    assert api.is_dragged(obj)
+    for k in range(1, 4):
+        mouse = tuple(centre + np.array((9.0, 6.0)) * k)
+        session.event("MOUSEMOVE", "NOTHING", mouse)
+        assert live_update.pending() == set()
+        bpy.context.view_layer.update()               # the redraw, before the operator's remember
+        assert live_update.pending() == set()
+    assert session.event("RET", "PRESS", mouse) == FINISHED and not api.is_dragged(obj)
+    bpy.context.view_layer.update()                   # after the drag, live update watches again
+    assert live_update.pending() == {obj.name}
+    live_update.flush()

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core import threads
 from ..core.errors import SkinDetachError
-from ..core.proxy_solve.proxy_solves import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL  # noqa: F401 (re-exported)
+from ..core.proxy_solve.proxy_solves import DRAG_BUDGET_UNITS, DRAG_TOL, SETTLE_SLICE_UNITS, SETTLE_TOL  # noqa: F401 (re-exported)
 from . import binding as stored
 from . import handle_symmetry, handles, mesh_io, rig_members
 from .preview_stand_in import end_stand_in, preview_of, preview_stands_in, record_stand_in
@@ -87,10 +87,10 @@ class Deformation:
         """The handle and anchor empties of the object, sorted by name."""
         return handles.handles_of(self.obj)
 
-    def _solve_proxy(self, tol, follow=False, budget_ms=None, idle=False):
+    def _solve_proxy(self, tol, follow=False, budget=None, idle=False):
         """(the rig's symmetry axis or "", :class:`DualLaplacianResult`, its :class:`Layout`, the held
         detail's (4, 4) motions, one per pair of the layout) from the handles' transforms
-        (``follow``, ``budget_ms``, ``idle``: see
+        (``follow``, ``budget``, ``idle``: see
         :meth:`.core.proxy_solve.proxy_solves.ProxySolves.solve`)."""
         empties = self.handles()
         handle_symmetry.sync_twins(self.obj, empties)
@@ -104,7 +104,7 @@ class Deformation:
         if ids.size == 0:
             raise SkinDetachError(f"object {self.obj.name!r}: expected at least one handle or anchor, got none; "
                                   f"select vertices and press Add Handle")
-        result = self.binding.solves.solve(ids, targets, self.preserve_volume, tol, follow, budget_ms, idle,
+        result = self.binding.solves.solve(ids, targets, self.preserve_volume, tol, follow, budget, idle,
                                            layout, motions)
         #: The last solve's (symmetry axis, result, layout, motions): what :meth:`commit` rebuilds from.
         self.solved = (axis, result, layout, motions)
@@ -159,21 +159,22 @@ class Deformation:
         mirror = (self.binding.mirror_map(axis), "XYZ".index(axis)) if axis else None
         return self.binding.rebuild(result.vertices, layout, motions, mirror)
 
-    def solve(self, tol=SETTLE_TOL, follow=False, budget_ms=None, idle=False):
+    def solve(self, tol=SETTLE_TOL, follow=False, budget=None, idle=False):
         """Solve (to ``tol``, see :class:`DualLaplacian`; from rest, or with ``follow`` on from the
-        last solves, within ``budget_ms``) and rebuild without writing anything.
+        last solves, within ``budget`` units of work at a 1,000-face proxy) and rebuild without
+        writing anything.
         Returns the :class:`DualLaplacianResult` (proxy, (m, 3)) and the (n, 3) float32 detail
         positions (a buffer the next call reuses)."""
-        solved = self._solve_proxy(tol, follow, budget_ms, idle)
+        solved = self._solve_proxy(tol, follow, budget, idle)
         return solved[1], self._rebuild(*solved)
 
-    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget_ms=None, idle=False):
+    def step(self, tol=SETTLE_TOL, mark=True, follow=False, budget=None, idle=False):
         """:meth:`solve`, then write the mesh and the proxy and record the step's figures on the
         binding (and, with ``mark``, the written digest: a drag marks only its last step, the
         confirm, since nothing else runs while it holds the mouse); returns a :class:`StepReport`."""
         start = time.perf_counter()
-        result, detail = self.solve(tol, follow, budget_ms, idle)
-        return self._report(start, result, detail, mark, settling=budget_ms is not None)
+        result, detail = self.solve(tol, follow, budget, idle)
+        return self._report(start, result, detail, mark, settling=budget is not None)
 
     def commit(self):
         """Write the full detail rebuilt from the last solve (no new solve: what a drag showed,
@@ -204,7 +205,7 @@ class Deformation:
         """The preview object a drag may show instead of the mesh, or None."""
         return preview_of(self.obj) if self.binding.preview is not None else None
 
-    def preview_step(self, tol=DRAG_TOL, follow=True, budget_ms=DRAG_BUDGET_MS, idle=False):
+    def preview_step(self, tol=DRAG_TOL, follow=True, budget=DRAG_BUDGET_UNITS, idle=False):
         """Solve and write the proxy and the preview object only (the mesh keeps what it holds);
         shows the preview in place of the mesh (see :meth:`show_preview`). Returns a
         :class:`StepReport` whose positions are the preview's (c, 3)."""
@@ -213,13 +214,13 @@ class Deformation:
             raise SkinDetachError(f"object {self.obj.name!r}: expected a preview object, it has none (or it was "
                                   f"deleted); press Rebuild")
         start = time.perf_counter()
-        _, result, layout, motions = self._solve_proxy(tol, follow, budget_ms, idle)
+        _, result, layout, motions = self._solve_proxy(tol, follow, budget, idle)
         positions = self.binding.rebuild_preview(result.vertices, layout, motions)
         self._check_writable(result.vertices, (self.proxy, preview), (positions,))
         mesh_io.write_positions(preview.data, positions, checked=True)
         mesh_io.write_positions(self.proxy.data, result.vertices, checked=True)
         self.show_preview(True, preview)
-        return self._reported(start, result, positions, budget_ms is not None, preview=True)
+        return self._reported(start, result, positions, budget is not None, preview=True)
 
     def show_preview(self, shown, preview=None):
         """Show the preview object (``preview``, looked up when not given) and hide the mesh in

@@ -16,7 +16,7 @@ from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from . import binding as stored
 from . import handles, rig_members
-from .deformation import DRAG_BUDGET_MS, DRAG_TOL, SETTLE_SLICE_MS, SETTLE_TOL, Deformation
+from .deformation import DRAG_BUDGET_UNITS, DRAG_TOL, SETTLE_SLICE_UNITS, SETTLE_TOL, Deformation
 from .skin_rig import PREVIEW_ABOVE
 
 RUNNING, FINISHED, CANCELLED = "RUNNING_MODAL", "FINISHED", "CANCELLED"
@@ -83,9 +83,9 @@ class DragSession:
     empties, the mesh and the proxy exactly as they were. A session ends with one of them:
     only the confirm records the written positions (moves skip that per-move checksum).
 
-    A move solves within :data:`DRAG_BUDGET_MS` and shows where it got. While the mouse rests, TIMER
+    A move solves within :data:`DRAG_BUDGET_UNITS` and shows where it got. While the mouse rests, TIMER
     events (the modal operator's window timer) go on with the same solve, a slice of
-    :data:`SETTLE_SLICE_MS` each, and show it, until it certifies to the settle tolerance (both
+    :data:`SETTLE_SLICE_UNITS` each, and show it, until it certifies to the settle tolerance (both
     budgets counted in work done, :mod:`..core.proxy_solve.work_budget`: a machine busy with other
     programs shows the same shapes, later): the header says
     "settling", then "settled", and further TIMER events do nothing. The confirm of a settled
@@ -279,24 +279,24 @@ class DragSession:
         if self._carries:  # else the solve would read their world matrices of the move before
             import bpy
             bpy.context.view_layer.update()
-        self._show(DRAG_TOL, DRAG_BUDGET_MS)
+        self._show(DRAG_TOL, DRAG_BUDGET_UNITS)
         self.step_ms.append(self.last.milliseconds)
 
-    def _show(self, tol, budget_ms, idle=False):
-        """Solve (following the last solves, within ``budget_ms``; ``idle``: a settle slice, which
+    def _show(self, tol, budget, idle=False):
+        """Solve (following the last solves, within ``budget``; ``idle``: a settle slice, which
         may also factor the Hessian the next moves precondition with) and show the result."""
         if self.previewing:
-            self.last = self.deformation.preview_step(tol, follow=True, budget_ms=budget_ms, idle=idle)
+            self.last = self.deformation.preview_step(tol, follow=True, budget=budget, idle=idle)
         else:  # the confirm marks (or the cancel restores)
-            self.last = self.deformation.step(tol, mark=False, follow=True, budget_ms=budget_ms, idle=idle)
+            self.last = self.deformation.step(tol, mark=False, follow=True, budget=budget, idle=idle)
         self.settled = tol == SETTLE_TOL and self.last.converged
 
     def settle_slice(self):
         """One slice of the settle while the mouse rests (a TIMER event): go on with the solve to
-        the settle tolerance within :data:`SETTLE_SLICE_MS` and show it; nothing once settled (or before
+        the settle tolerance within :data:`SETTLE_SLICE_UNITS` and show it; nothing once settled (or before
         the first move). Returns whether the shown shape is settled."""
         if self.last is not None and not self.settled:
-            self._show(SETTLE_TOL, SETTLE_SLICE_MS, idle=True)
+            self._show(SETTLE_TOL, SETTLE_SLICE_UNITS, idle=True)
         return self.settled
 
     def confirm(self):
@@ -316,6 +316,18 @@ class DragSession:
             self._saved.mesh = kept
         self.deformation.restore(self._saved)
         return CANCELLED
+
+
+def dragged(obj):
+    """Whether a drag of one of ``obj``'s handles is running (between its start and its confirm or
+    cancel): its poses are the drag's own, which live update leaves alone."""
+    for session in list(_RUNNING):
+        try:
+            if session.obj == obj:
+                return True
+        except ReferenceError:  # its objects went with a file loaded during the drag
+            _RUNNING.discard(session)
+    return False
 
 
 def before_save():

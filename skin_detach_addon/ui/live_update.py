@@ -58,6 +58,8 @@ def notice(scene):
     if _state["busy"] or not scene.skin_detach.live_update:
         return
     for obj in api.bound_objects(scene.objects):
+        if api.is_dragged(obj):  # a running drag solves its own poses (its moves, settle, confirm)
+            continue
         proxy = api.proxy_of(obj)
         if proxy is not None and handle_signature(obj, proxy) != _SOLVED.get(obj.name):
             _pending.add(obj.name)
@@ -82,7 +84,7 @@ def flush():
         scene = bpy.context.scene
         for name in sorted(_pending):
             obj = bpy.data.objects.get(name)
-            if obj is None or not api.is_bound(obj):
+            if obj is None or not api.is_bound(obj) or api.is_dragged(obj):
                 continue
             try:
                 large = api.figures(obj)["build"].get("detail_vertices", 0) > scene.skin_detach.preview_above

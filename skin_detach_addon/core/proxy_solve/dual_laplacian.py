@@ -50,7 +50,7 @@ from .pulled_energy import STRENGTH, PulledEnergy
 from .rotated_energy import RotatedEnergy
 from ..validation import as_points, as_triangles, as_vertex_ids
 from .volume_constraint import VolumeConstraint
-from .work_budget import WorkBudget, WorkRate, cpu_ms
+from .work_budget import WorkBudget, scaled_units
 
 #: Dual triangles with |(b - a) x (c - a)| under this fraction of their squared size use a face frame.
 DEGENERATE_DUAL = 1e-10
@@ -300,23 +300,12 @@ class DualLaplacian:
         rest_state = self.energy_terms.at(self.rest)
         self._lagged = LaggedHessian(HessianFactor(self.energy_terms, self.free, m), rest_state,
                                      None if vertex_groups is None else lambda state: state.rotations(vertex_groups))
-        #: CPU milliseconds per unit of work (:mod:`.work_budget`): first one unit's, timed here at
-        #: rest (a Hessian product and a preconditioner solve; nothing to time without a free
-        #: vertex, whose solves do no work), then every solve's.
-        self.rate = WorkRate(self._time_unit(rest_state, m) if self.free.size else 1.0)
         self.energy_terms.reset()
 
-    def _time_unit(self, state, m):
-        """CPU milliseconds of one unit of work at ``state``: a Hessian product and a solve of the
-        held factor (of K without one), the faster of two (the first may pay for cold caches)."""
-        solve = self._lagged.solver(state) or self._solve_k
-        probe = np.ones((m, 3))
-        times = []
-        for _ in range(2):
-            begun = cpu_ms()
-            solve(self.energy_terms.hessian_product(state, probe)[self.free])
-            times.append(cpu_ms() - begun)
-        return max(min(times), 1e-6)
+    def units(self, reference_units):
+        """The units of a budget of ``reference_units`` at a 1,000-face proxy for this solver
+        (:func:`.work_budget.scaled_units` of its free vertices): the same on every machine."""
+        return scaled_units(reference_units, self.free.size)
 
     def _setup_rigidity(self, m):
         """Spoke operators of the rigidity term: every edge in both directions, as a spoke of its
@@ -392,8 +381,8 @@ class DualLaplacian:
         out[self.free] = self._lu.solve(np.ascontiguousarray(gradient))
         return out
 
-    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_ms=None, idle=False,
-              pull_motions=None, budget_units=None):
+    def solve(self, constrained_positions, initial=None, max_iter=50, tol=1e-6, budget_units=None, idle=False,
+              pull_motions=None):
         """Deform the proxy so that the constrained vertices reach ``constrained_positions`` (c, 3)
         and the pulls' detail follows ``pull_motions`` (one (4, 4) rigid motion per pull; None:
         each holds its detail at rest).
@@ -402,11 +391,10 @@ class DualLaplacian:
         whatever was solved before); ``initial`` (m, 3), e.g. the extrapolated previous moves of a
         drag, starts it there instead. "rotated": converged when the Newton step's largest vertex
         move, squared over the squared diagonal, is at most ``tol`` (:mod:`.projected_newton`);
-        ``budget_ms`` (None: no limit) stops it before an iteration that, costing as much work as
-        the last, would end past the work this machine does in that many milliseconds of CPU
-        (:attr:`rate`; not converged: the next call may continue from its result; the first
-        iteration always runs), ``budget_units`` likewise past that many units of work
-        (:mod:`.work_budget`; the same iterate whatever the clock does). "paper": stops
+        ``budget_units`` (None: no limit) stops it before an iteration that, costing as much work
+        as the last, would end past that many units of work (:mod:`.work_budget`; the same iterate
+        whatever the clock does; not converged: the next call may continue from its result; the
+        first iteration always runs). "paper": stops
         when the largest squared move of a vertex in one iteration is at most ``tol``, or when
         :data:`STALL_ITERATIONS` iterations in a row found no smaller change (the iteration
         cycles, e.g. around a fold): then the iterate with the smallest change is returned.
@@ -420,12 +408,7 @@ class DualLaplacian:
             raise SkinDetachError(f"max_iter: expected a positive integer, got {max_iter!r}")
         if not (isinstance(tol, (int, float, np.floating)) and np.isfinite(tol) and tol >= 0):
             raise SkinDetachError(f"tol: expected a finite number >= 0, got {tol!r}")
-        if budget_ms is not None and (isinstance(budget_ms, bool) or not isinstance(budget_ms, (int, float, np.number))
-                                      or not budget_ms > 0):
-            raise SkinDetachError(f"budget_ms: expected None or a number of milliseconds > 0, got {budget_ms!r}")
-        if budget_units is not None and budget_ms is not None:
-            raise SkinDetachError(f"budget_units: expected None with budget_ms given ({budget_ms!r}), got "
-                                  f"{budget_units!r}")
+        budget = None if budget_units is None else WorkBudget(budget_units)  # checks it
         motions = [np.eye(4)] * self.n_pulls if pull_motions is None else list(pull_motions)
         if len(motions) != self.n_pulls:
             raise SkinDetachError(f"pull_motions: expected {self.n_pulls} (4, 4) motions, got {len(motions)}")
@@ -439,14 +422,9 @@ class DualLaplacian:
             if initial is None:  # from rest, bit for bit the same whatever was solved before
                 self.energy_terms.reset()
                 self._lagged.reset()
-            budget = self.rate.budget(budget_ms) if budget_ms is not None else (
-                None if budget_units is None else WorkBudget(budget_units))
             work = budget if budget is not None else WorkBudget(1 << 62)  # counts an unbudgeted solve's work
-            begun = cpu_ms()
-            result = self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), budget, work,
-                                            bool(idle) and initial is not None, motions)
-            self.rate.record(work.spent, cpu_ms() - begun)
-            return result
+            return self._continue_rotated(points, start, fixed_points, int(max_iter), float(tol), budget, work,
+                                          bool(idle) and initial is not None, motions)
         known = self._a_fixed @ fixed_points
         if self.rigidity:
             known_edges = self._e_fixed @ fixed_points
@@ -510,6 +488,7 @@ class DualLaplacian:
         ``budget``: the :class:`.work_budget.WorkBudget` of the solve or None; ``work`` counts the
         work done (``budget`` itself when there is one)."""
         pulled = self.n_pulls > 0
+        catch_up = budget is not None and not refresh  # a drag's move (see projected_newton.minimise)
         jump = float(np.abs(fixed_points - start).max()) / self.diagonal
         if jump > WARM_LIMIT:
             # Too far for the guess to say which stationary point is meant: start from rest, so the
@@ -524,7 +503,7 @@ class DualLaplacian:
             if pulled:
                 self.energy_terms.set_motions([np.eye(4) + (stage / stages) * (motion - np.eye(4)) for motion in motions])
             staged = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal,
-                              STAGE_TOL, max_iter, work, self._lagged, refresh)
+                              STAGE_TOL, max_iter, work, self._lagged, refresh, catch_up)
             points = staged.points
             if budget is not None and not staged.converged:
                 # Out of budget: the handles where they belong, the rest where the stages got to; the
@@ -536,7 +515,7 @@ class DualLaplacian:
         if pulled:
             self.energy_terms.set_motions(motions)
         result = minimise(self.energy_terms, volume, self._solve_k, points, self.free, self.diagonal, tol,
-                          max_iter, work, self._lagged, refresh)
+                          max_iter, work, self._lagged, refresh, catch_up)
         return DualLaplacianResult(result.points, result.iterations, result.converged,
                                    self.volume_change(result.points), result.history, result.energy)
 

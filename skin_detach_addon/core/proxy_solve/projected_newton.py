@@ -53,6 +53,16 @@ CG_OVERRUN = 2.0
 #: the benchmark's turn, 4 made a factor in each of the first slices (95 units to 1e-3 of the
 #: diagonal, 65 with 8; the same on four other meshes).
 REFRESH_STEPS = 8
+#: A drag move (``catch_up``) whose accepted Newton step moved a vertex by more than this fraction of
+#: the diagonal is far from its path's shape (the converged path snapped: the kept volume's pose
+#: changed branch, 0.1-0.2 of the diagonal within a move or two on cow) and goes on past its
+#: budget, an iteration at a time, while its steps stay that long ...
+CATCH_UP_STEP = 1e-2
+#: ... up to this many times its budget in all. Budgeted moves of one Newton iteration each took
+#: 10+ moves to cross such a snap, and the settle 8-10 slices after them (a release that pops
+#: when the mouse rests less long, or the machine is busy); now the snap's moves take longer
+#: (a few frames), and the shape shown crosses it with them.
+CATCH_UP_OVERRUN = 6.0
 #: Armijo's sufficient decrease, and the shortenings of the step at most.
 ARMIJO = 1e-4
 BACKTRACKS = 20
@@ -110,7 +120,7 @@ class _Tangent:
 
 
 def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, budget=None, lagged=None,
-             refresh=False):
+             refresh=False, catch_up=False):
     """Projected Newton (module docstring) from ``points`` (m, 3), whose free rows are the start
     and whose other rows are held. ``volume``: a VolumeConstraint with at least one kept component,
     or None; ``solve_k(r (f, j)) -> (f, j)`` applies K^-1 over the free vertices; ``budget``: a
@@ -122,6 +132,9 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, bud
     needed more than :data:`REFRESH_STEPS` CG steps (:attr:`~.hessian_factor.LaggedHessian.steps`),
     else at the step accepted after CG needed that many (without, the solve is a function of its
     start and the factor it is given); a refresh spends :data:`.work_budget.FACTOR_UNITS`.
+    ``catch_up`` (a drag's move): past the budget, an iteration whose accepted step moved a vertex
+    by more than :data:`CATCH_UP_STEP` of the diagonal is followed by another, up to
+    :data:`CATCH_UP_OVERRUN` times the budget (counted in units: the same iterates on any machine).
     Returns :class:`NewtonResult`: its energy never rises from one iterate to the next, however
     little the budget."""
     x = points.copy()
@@ -135,6 +148,7 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, bud
             budget.spend(FACTOR_UNITS)
     history, energies = [], [state.energy]
     converged, iterations = False, 0
+    most = None if budget is None else (1.0 + CATCH_UP_OVERRUN) * budget.units
     for iterations in range(1, max_iter + 1):
         begun = 0 if budget is None else budget.spent
         if budget is not None:
@@ -200,7 +214,9 @@ def minimise(energy, volume, solve_k, points, free, diagonal, tol, max_iter, bud
         converged = not negative and length == 1.0 and moved <= tol
         # The next one, costing as much as this one, would end past the budget: stop (before
         # fitting the rotations at x).
-        last = converged or (budget is not None and budget.would_pass(budget.spent - begun))
+        cost = 0 if budget is None else budget.spent - begun
+        last = converged or (budget is not None and budget.would_pass(cost) and not (
+            catch_up and moved > CATCH_UP_STEP ** 2 and budget.make_room(cost, most)))
         # A Hessian with negative curvature would not factor positive definite: no refresh then.
         refreshing = refresh and lagged is not None and not negative and not converged and steps > REFRESH_STEPS
         if not last or refreshing:

@@ -17,17 +17,18 @@ from .dual_laplacian import DualLaplacian
 DRAG_TOL = 1e-8
 #: ... and when a result is kept (Apply, live update, confirm, bake).
 SETTLE_TOL = 1e-12
-#: Milliseconds of solve in a drag move, counted as work (:mod:`.work_budget`: the units this
-#: machine's solving thread does in that much CPU time, so another program taking the core makes
-#: the move take longer, not do less): one Newton iteration at 1,000 proxy faces, no further one
-#: that would end past it; its conjugate gradients stop past the budget once the rest of their
-#: step is within the tolerance (projected_newton.CG_OVERRUN), so every move shows a shape near
-#: the path's and a move costs little more than Blender's own stack; the next move, or the settle
-#: while the mouse rests, continues from where it stopped.
-DRAG_BUDGET_MS = 4.0
-#: Milliseconds of solve, counted as work alike, in one slice of the settle while the mouse rests
-#: (a TIMER event).
-SETTLE_SLICE_MS = 12.0
+#: Work of a drag move's solve, in units of :mod:`.work_budget` at a 1,000-face proxy (scaled by
+#: the solver's free vertices, :meth:`DualLaplacian.units`; never read off a clock, so the same
+#: events show the same shapes on any machine, busy or not): one Newton iteration (8 units) and
+#: its conjugate gradients, no further iteration that would end past it; the conjugate gradients
+#: go on past the budget while the rest of their step is over the tolerance, up to
+#: projected_newton.CG_OVERRUN times it, so every move shows a shape near the path's; the next
+#: move, or the settle while the mouse rests, continues from where it stopped. About 4 ms of one
+#: core at 1,000 faces.
+DRAG_BUDGET_UNITS = 12
+#: Work, counted alike, of one slice of the settle while the mouse rests (a TIMER event): a new
+#: Hessian factor (30 units) fits in one.
+SETTLE_SLICE_UNITS = 36
 #: Iterations a proxy solve may take before it reports that it did not converge.
 MAX_ITERATIONS = 300
 #: Factored solvers kept (one per constraint layout; the oldest goes first).
@@ -72,21 +73,22 @@ class ProxySolves:
         #: (ids bytes, preserve_volume, layout key) -> [DualLaplacian, recent results].
         self._solvers = {}
 
-    def solve(self, ids, targets, preserve_volume, tol, follow=False, budget_ms=None, idle=False, layout=None,
+    def solve(self, ids, targets, preserve_volume, tol, follow=False, budget=None, idle=False, layout=None,
               motions=()):
         """:class:`DualLaplacianResult` for the constrained proxy ids (c,) at ``targets`` (c, 3),
         the held detail of ``layout`` (a :class:`..detached_surface.held_detail.Layout`; each vertex
         by the group that owns it, :attr:`~..detached_surface.held_detail.Layout.owned`) pulled
         along ``motions`` (one (4, 4) per pair of ``layout.held``). With ``follow`` the solve starts
         from :func:`follow_start` of the last two solutions of the same layout, as a drag does, and
-        stops after the work of ``budget_ms`` (None: no limit; ``idle``: see
-        :meth:`DualLaplacian.solve`);
+        stops after ``budget`` units of work at a 1,000-face proxy (:meth:`DualLaplacian.units`;
+        None: no limit; ``idle``: see :meth:`DualLaplacian.solve`);
         without it from rest, so the same handles give the same shape whatever was solved before."""
         key = self.prepare(ids, preserve_volume, layout)
         solver, recent = self._solvers[key]
         initial = follow_start(recent, ids, targets) if follow else None
         result = solver.solve(targets, initial=initial, max_iter=MAX_ITERATIONS, tol=tol,
-                              budget_ms=budget_ms if follow else None, idle=idle and follow,
+                              budget_units=solver.units(budget) if follow and budget is not None else None,
+                              idle=idle and follow,
                               pull_motions=list(motions) if solver.n_pulls else None)
         self._solvers[key][1] = [result] + recent[:1]
         return result
