@@ -74,8 +74,9 @@ def take_parts_picture(ui):
     and the belt ride on the body."""
     import sys
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent.parent))
-    from bench.riders import body_parts, torus
+    from bench.riders import torus, uv_sphere
     out = pathlib.Path(ui.pictures)
+    yield from ui.setup()
     with rigs.override(ui):
         for obj in list(bpy.data.objects):
             bpy.data.objects.remove(obj)
@@ -84,20 +85,35 @@ def take_parts_picture(ui):
     body.name = "Armadillo"
     points = rigs.positions(body).astype(np.float64)
     triangles = np.array([p.vertices[:] for p in body.data.polygons])
-    parts = body_parts(points, triangles, ("eye",))
-    eye, eye_faces = parts["eye"]
     extent = np.ptp(points, axis=0)
     longest, middle, shortest = np.argsort(extent)[::-1]
-    mirrored = eye.copy()
-    mirrored[:, shortest] = 2 * points[:, shortest].mean() - mirrored[:, shortest]
-    # The belt: a torus round the waist (40 % up the longest axis), a little wider than the body there.
-    level = points[:, longest].min() + 0.4 * extent[longest]
-    ring = points[np.abs(points[:, longest] - level) <= 0.01 * extent[longest]]
+    low = points.min(axis=0)
+    centre_line = np.median(points[:, middle])
+    # The head: the top eighth of the height, near the middle (the raised hand is off to a side);
+    # the face: the side of the shortest axis the head sticks out farther on.
+    head = points[(points[:, longest] > low[longest] + 0.87 * extent[longest])
+                  & (np.abs(points[:, middle] - centre_line) < 0.12 * extent[middle])]
+    mid = head.mean(axis=0)
+    side = 1.0 if head[:, shortest].max() - mid[shortest] > mid[shortest] - head[:, shortest].min() else -1.0
+    front = head[np.argmax(side * head[:, shortest])]
+    radius = 0.018 * float(np.linalg.norm(extent))
+    eyes = []
+    for shift in (-1.0, 1.0):
+        spot = front.copy()
+        spot[middle] += shift * 2.2 * radius
+        spot[longest] += 1.5 * radius
+        near = head[np.argmin(np.linalg.norm(head - spot, axis=1))]  # on the face there
+        eyes.append(uv_sphere(near, radius))
+    # The belt: round the waist (45 % up), hugging the torso's cross-section there.
+    level = low[longest] + 0.45 * extent[longest]
+    ring = points[(np.abs(points[:, longest] - level) <= 0.01 * extent[longest])
+                  & (np.abs(points[:, middle] - centre_line) < 0.3 * extent[middle])]
     centre = ring.mean(axis=0)
     axis = np.eye(3)[longest]
     radial = np.linalg.norm((ring - centre) - np.outer((ring - centre) @ axis, axis), axis=1)
-    belt, belt_faces = torus(centre, axis, 1.04 * radial.max(), 0.02 * extent[longest], around=48, tube=8)
-    made = [_mesh_object("Eye.L", eye, eye_faces, body), _mesh_object("Eye.R", mirrored, eye_faces[:, ::-1], body),
+    belt, belt_faces = torus(centre, axis, 1.03 * np.percentile(radial, 90) + 0.01 * extent[longest],
+                             0.015 * extent[longest], around=48, tube=8)
+    made = [_mesh_object("Eye.L", *eyes[0], body), _mesh_object("Eye.R", *eyes[1], body),
             _mesh_object("Belt", belt, belt_faces, body)]
     for obj in made + [body]:
         obj.select_set(True)
