@@ -187,7 +187,24 @@ def riders_section(data):
             "its own stretch no more than the surface's under it, the prop unmoved. Blender's stack: the body "
             "decimated to the same faces with Hook + Laplacian Deform, Surface Deform on the body and on each part, "
             "same run.\n\n" + heading(data["meta"]) + "\n" + TABLE_HEAD + "\n"
-            + "\n".join(line for row in rows for line in table_lines(row)) + "\n")
+            + "\n".join(line for row in rows for line in table_lines(row)) + "\n" + several_table(data["rows"]))
+
+
+def several_table(rows):
+    """The character of several objects (``--several``), if measured."""
+    row = rows.get("several")
+    if row is None:
+        return ""
+    columns = [("body size", lambda r: r["size"]), ("vertices", lambda r: f"{r['vertices']:,}"),
+               ("objects", lambda r: str(r["objects"])), ("build joined s", lambda r: f"{r['build_joined_s']:.2f}"),
+               ("build as objects s", lambda r: f"{r['build_separate_s']:.2f}"),
+               ("ratio (goal <= 1.2)", lambda r: f"{r['build_ratio']:.2f}"),
+               ("move ms median / p95 (goal <= 16 median)", lambda r: f"{r['move_ms_median']:.1f} / {r['move_ms_p95']:.1f}"),
+               ("confirm ms", lambda r: f"{r['confirm_ms']:.0f}"),
+               ("objects against the joined mesh (diag)", lambda r: f"{r['separate_vs_joined_diag']:.1e}")]
+    return ("\nA character of several objects: the armadillo and two eyes, a plate and a bracelet as separate "
+            "objects built as one rig, against the same meshes joined into one (the same run).\n\n"
+            + table(columns, [row]))
 
 
 def scale_section(data):
