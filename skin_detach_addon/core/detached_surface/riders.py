@@ -32,6 +32,7 @@ nothing.
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..errors import SkinDetachError
@@ -348,16 +349,28 @@ class RigidRiders:
         p = int(self._piece.max()) + 1
         order = np.argsort(self._piece, kind="stable")
         self._order, self._bounds = order, np.searchsorted(self._piece[order], np.arange(p + 1))
-        patch = under_rest[self._under_index[order]]  # (r, NEAREST, 3), piece after piece
-        self._patch_count = np.diff(self._bounds) * self._under_index.shape[1]
-        self._patch_centre = np.add.reduceat(patch.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
-        self._patch_local = patch - np.repeat(self._patch_centre, np.diff(self._bounds), axis=0)[:, None, :]
-        self._patch_size = np.add.reduceat(np.einsum("rki,rki->r", self._patch_local, self._patch_local),
-                                           self._bounds[:-1])
+        # A piece's patch as counts on the free vertices under it: (p, q) sparse, one row a piece.
+        q = self.under.size
+        counts = sp.csr_matrix((np.ones(self._under_index.size), (np.repeat(self._piece, self._under_index.shape[1]),
+                                                                   self._under_index.ravel())), shape=(p, q))
+        counts.sum_duplicates()
+        self._patch_count = np.asarray(counts.sum(axis=1)).ravel()
+        self._patch_mean = sp.csr_matrix(counts.multiply(1.0 / self._patch_count[:, None]))
+        self._patch_centre = self._patch_mean @ under_rest
+        # covariance[:, a, b] = sum_j counts[p, j] (u_j - centre_p)_a out_j_b: one sparse product per a.
+        rows, cols = counts.nonzero()
+        values = np.asarray(counts[rows, cols]).ravel()
+        spread = under_rest[cols] - self._patch_centre[rows]
+        self._patch_axes = [sp.csr_matrix((values * spread[:, a], (rows, cols)), shape=(p, q)) for a in range(3)]
+        self._patch_size = np.bincount(rows, weights=values * np.einsum("ij,ij->i", spread, spread), minlength=p)
         own_centre = np.add.reduceat(self.points, self.starts[:-1], axis=0) / self.count[:, None]
-        self._own_local = self.points - own_centre[self._rider]
-        self._own_size = np.maximum(np.add.reduceat(np.einsum("ri,ri->r", self._own_local, self._own_local),
-                                                    self.starts[:-1]), 1e-300)
+        own_local = self.points - own_centre[self._rider]
+        r = self.ids.size
+        self._own_size = np.maximum(np.add.reduceat(np.einsum("ri,ri->r", own_local, own_local), self.starts[:-1]),
+                                    1e-300)
+        # The rider's own covariance, rest against the skin's placing, the same way (k, r) a row a rider.
+        self._own_axes = [sp.csr_matrix((own_local[:, a], (self._rider, np.arange(r))), shape=(self.count.size, r))
+                          for a in range(3)]
         # Each vertex's pieces: the nearest of its own rider (the rider's id as a far fourth axis).
         centres = np.add.reduceat(self.points[order], self._bounds[:-1], axis=0) / np.diff(self._bounds)[:, None]
         piece_rider = self._rider[order][self._bounds[:-1]]
@@ -369,7 +382,11 @@ class RigidRiders:
         distance, near = distance.reshape(-1, k), near.reshape(-1, k)
         weight = np.clip(1.0 - (distance / (2.0 * size)) ** 2, 0.0, None) ** 2
         weight[np.arange(near.shape[0]), 0] = np.maximum(weight[:, 0], 1e-12)  # its own piece, at least
-        self._near, self._weight = near, weight / weight.sum(axis=1, keepdims=True)
+        weight /= weight.sum(axis=1, keepdims=True)
+        used = max(int((weight > 0).sum(axis=1).max()), 1)  # columns that carry weight (one: rigid riders)
+        order_by_weight = np.argsort(-weight, axis=1, kind="stable")[:, :used]
+        self._near = np.take_along_axis(near, order_by_weight, axis=1)
+        self._weight = np.take_along_axis(weight, order_by_weight, axis=1)
 
     def _steady(self, out):
         """(p, 3, 3) what makes each piece's fit unique where its patch alone does not (free
@@ -378,9 +395,7 @@ class RigidRiders:
         (the skin follows the proxy's faces, whose frames turn; a rigid motion gives the same
         rotation there), and a 1e-9 share of the identity where even that is flat."""
         skin = np.asarray(out[self.ids], dtype=np.float64)
-        centre = np.add.reduceat(skin, self.starts[:-1], axis=0) / self.count[:, None]
-        own = np.add.reduceat(self._own_local[:, :, None] * (skin - centre[self._rider])[:, None, :],
-                              self.starts[:-1], axis=0)
+        own = np.stack([axis @ skin for axis in self._own_axes], axis=1)  # (k, 3, 3): rest centred
         rider = self._piece_rider
         nudge = (1e-3 * self._patch_size / self._own_size[rider])[:, None, None] * own[rider]
         return nudge + (1e-9 * self._patch_size + 1e-300)[:, None, None] * np.eye(3)
@@ -396,18 +411,22 @@ class RigidRiders:
             out[self.still[rows]] = self._still_rest[rows]
         if not self.ids.size or not self.under.size:
             return out
-        moved = np.asarray(out[self.under], dtype=np.float64)[self._under_index[self._order]]
-        centre = np.add.reduceat(moved.sum(axis=1), self._bounds[:-1], axis=0) / self._patch_count[:, None]
-        covariance = np.add.reduceat(np.einsum("rki,rkj->rij", self._patch_local, moved), self._bounds[:-1], axis=0)
+        moved = np.asarray(out[self.under], dtype=np.float64)
+        centre = self._patch_mean @ moved
+        covariance = np.stack([axis @ moved for axis in self._patch_axes], axis=1)  # (p, 3, 3)
         u, _, vt = np.linalg.svd(covariance + self._steady(out))
         flip = np.linalg.det(np.einsum("kij,kjl->kil", u, vt)) < 0
         vt[flip, 2, :] *= -1.0
         rotation = np.einsum("kji,klj->kil", vt, u)  # R = V U^T (p' = R p + t), one per piece
-        placed = np.zeros_like(self.points)
-        for column in range(self._near.shape[1]):
-            piece = self._near[:, column]
-            local = self.points - self._patch_centre[piece]
-            placed += self._weight[:, column, None] * (np.einsum("ri,rji->rj", local, rotation[piece]) + centre[piece])
+        # p' = R (x - c) + c' = R x + (c' - R c): one rotation and offset a piece, blended per vertex.
+        offset = centre - np.einsum("kij,kj->ki", rotation, self._patch_centre)
+        if self._near.shape[1] == 1:
+            piece = self._near[:, 0]
+            placed = np.einsum("rij,rj->ri", rotation[piece], self.points) + offset[piece]
+        else:
+            blended = np.einsum("rc,rcij->rij", self._weight, rotation[self._near])
+            placed = np.einsum("rij,rj->ri", blended, self.points) + np.einsum("rc,rci->ri", self._weight,
+                                                                               offset[self._near])
         if riders_held is not None and riders_held.any():
             rows = ~riders_held[self._rider]
             out[self.ids[rows]] = placed[rows]
