@@ -198,12 +198,19 @@ def _mean_edges(points, triangles, face_part, p):
     return total / np.maximum(3 * np.bincount(face_part, minlength=p), 1)
 
 
+def _boxes(points, group, count):
+    """(low (g, 3), high (g, 3)): the bounding box of each of ``count`` groups of ``points`` (v, 3),
+    ``group`` (v,) the group of each point."""
+    low = np.full((count, 3), np.inf)
+    high = np.full((count, 3), -np.inf)
+    np.minimum.at(low, group, points)
+    np.maximum.at(high, group, points)
+    return low, high
+
+
 def _part_diagonals(points, part, p):
     """(p,) the bounding-box diagonal of each part (``part`` (v,) labels of ``points`` (v, 3))."""
-    low = np.full((p, 3), np.inf)
-    high = np.full((p, 3), -np.inf)
-    np.minimum.at(low, part, points)
-    np.maximum.at(high, part, points)
+    low, high = _boxes(points, part, p)
     return np.linalg.norm(high - low, axis=1)
 
 
@@ -329,30 +336,27 @@ class RigidRiders:
         self.rest = rest
         self.points = np.asarray(rest[self.ids], dtype=np.float64)
         self._rider = np.repeat(np.arange(self.count.size), self.count)
-        self.under, under_rest, self._under_index = _under(rest, self.points, free)
+        self.under, under_rest, under_index = _under(rest, self.points, free)
         if not self.under.size or not self.ids.size:
             return
         size = PIECE * bbox_diagonal(np.asarray(rest, dtype=np.float64)) + 1e-300
         # Cubes from each rider's own corner, as many along an axis as its extent needs: a rider
         # smaller than a piece is one piece, whatever its place.
-        low = np.full((self.count.size, 3), np.inf)
-        high = np.full((self.count.size, 3), -np.inf)
-        np.minimum.at(low, self._rider, self.points)
-        np.maximum.at(high, self._rider, self.points)
+        low, high = _boxes(self.points, self._rider, self.count.size)
         across = np.maximum(np.ceil((high - low) / size), 1.0)
         step = np.maximum((high - low) / across, 1e-300)
         cell = np.minimum(np.floor((self.points - low[self._rider]) / step[self._rider]),
                           across[self._rider] - 1).astype(np.int64)
         key = np.stack([self._rider, cell[:, 0], cell[:, 1], cell[:, 2]], axis=1)
         _, piece = np.unique(key, axis=0, return_inverse=True)
-        self._piece = piece.ravel()
-        p = int(self._piece.max()) + 1
-        order = np.argsort(self._piece, kind="stable")
-        self._order, self._bounds = order, np.searchsorted(self._piece[order], np.arange(p + 1))
+        piece = piece.ravel()
+        p = int(piece.max()) + 1
+        order = np.argsort(piece, kind="stable")
+        bounds = np.searchsorted(piece[order], np.arange(p + 1))
         # A piece's patch as counts on the free vertices under it: (p, q) sparse, one row a piece.
         q = self.under.size
-        counts = sp.csr_matrix((np.ones(self._under_index.size), (np.repeat(self._piece, self._under_index.shape[1]),
-                                                                   self._under_index.ravel())), shape=(p, q))
+        counts = sp.csr_matrix((np.ones(under_index.size), (np.repeat(piece, under_index.shape[1]),
+                                                              under_index.ravel())), shape=(p, q))
         counts.sum_duplicates()
         self._patch_count = np.asarray(counts.sum(axis=1)).ravel()
         self._patch_mean = sp.csr_matrix(counts.multiply(1.0 / self._patch_count[:, None]))
@@ -372,8 +376,8 @@ class RigidRiders:
         self._own_axes = [sp.csr_matrix((own_local[:, a], (self._rider, np.arange(r))), shape=(self.count.size, r))
                           for a in range(3)]
         # Each vertex's pieces: the nearest of its own rider (the rider's id as a far fourth axis).
-        centres = np.add.reduceat(self.points[order], self._bounds[:-1], axis=0) / np.diff(self._bounds)[:, None]
-        piece_rider = self._rider[order][self._bounds[:-1]]
+        centres = np.add.reduceat(self.points[order], bounds[:-1], axis=0) / np.diff(bounds)[:, None]
+        piece_rider = self._rider[order][bounds[:-1]]
         self._piece_rider = piece_rider
         far = 1e3 * (float(np.abs(self.points).max()) + size)
         k = min(BLEND, p)
