@@ -101,3 +101,20 @@ def test_a_damaged_compact_record_is_refused_naming_the_field(damage, expected):
     with pytest.raises(SkinDetachError) as caught:
         surface_from_compact(arrays, points, tris, source="binding of 'box'")
     assert expected in str(caught.value) and "binding of 'box'" in str(caught.value), str(caught.value)
+
+
+def test_content_digests_are_of_the_values_not_of_how_they_are_stored():
+    from skin_detach_addon.core.detached_surface.compact_surface import check_digests, content_digests
+    carrier = np.array([3, -1, 7, 0])
+    stored = content_digests({"carrier": carrier.astype(np.int16), "tag": "skin", "rest": np.ones((2, 3), np.float32)})
+    # The same values read back in another integer width, a 0-d string, a flat array: the same digests.
+    assert content_digests({"carrier": carrier.astype(np.int32), "tag": np.array("skin"),
+                            "rest": np.ones(6, np.float32)}) == stored
+    check_digests({"carrier": carrier.astype(np.int8), "tag": "skin", "rest": np.ones(6, np.float32)}, stored, "b")
+    for changed, key in (({"carrier": np.array([3, -1, 7, 1])}, "carrier"), ({"tag": "skim"}, "tag"),
+                         ({"rest": np.ones(6, np.float64)}, "rest"), ({"carrier": carrier[:3]}, "carrier")):
+        arrays = {"carrier": carrier, "tag": "skin", "rest": np.ones(6, np.float32), **changed}
+        with pytest.raises(SkinDetachError, match=rf"^b {key}: expected the values the build stored"):
+            check_digests(arrays, stored, "b")
+    with pytest.raises(SkinDetachError, match="b rest: expected the stored values the build wrote, it is missing"):
+        check_digests({"carrier": carrier, "tag": "skin"}, stored, "b")

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..core import threads
 from ..core.detached_surface import HeldPlacement, Preview, SkinDetachedSurface, SkinStretch
-from ..core.detached_surface.compact_surface import compact_arrays, surface_from_compact
+from ..core.detached_surface.compact_surface import check_digests, compact_arrays, content_digests, surface_from_compact
 from ..core.detached_surface.held_detail import layout_of
 from ..core.detached_surface.surface import BACKGROUND_ABOVE
 from ..core.detached_surface.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
@@ -55,6 +55,11 @@ WHOLE_SKIN_SCHEMA = 1
 #: with this suffix (one of :data:`NARROW_TYPES`).
 TYPE_SUFFIX = "_type"
 NARROW_TYPES = {"int8": np.int8, "int16": np.int16}
+#: The record's group of {key: digest} of every stored array and figure of the binding (their
+#: values, :func:`.core.detached_surface.compact_surface.content_digests`), checked on opening: data
+#: changed outside Skin Detach (well-formed, so every other check passes) is refused, not deformed
+#: wrong. Records of earlier versions have none and are read unchecked.
+DIGESTS = "digests"
 #: Keys of a schema-1 record that schema 2 does not keep.
 WHOLE_SKIN_KEYS = ("skin_vertex", "skin_face", "skin_bary", "skin_height", "skin_weight", "skin_case", "weld")
 _CACHE = {}
@@ -267,15 +272,22 @@ def store(obj, surface, rest, proxy, preview=None, members=None, local_rest=None
     rig_members.tag(obj, members if several else [obj])
     arrays = _new_store(obj, group)
     arrays["rest"] = rest
+    content = {"rest": rest}
     if several:
-        arrays[rig_members.LOCAL_REST] = np.ascontiguousarray(local_rest, dtype=np.float32).ravel()
+        arrays[rig_members.LOCAL_REST] = content[rig_members.LOCAL_REST] = \
+            np.ascontiguousarray(local_rest, dtype=np.float32).ravel()
     # The arrays one at a time: each copy goes once Blender holds its own.
     entries = [_flat_props(compact_arrays(surface))]
     if preview is not None:
         group["preview"] = preview
         entries.append(_flat_props(surface.preview.to_arrays(), PREVIEW_PREFIX))
+    digests = content_digests(content)
     for key, value in (entry for part in entries for entry in part):
         (arrays if _is_array(value) else group)[key] = value
+        if not key.endswith(TYPE_SUFFIX):  # digests of the values as they are read back (_unpacked)
+            kind = NARROW_TYPES.get(group.get(key + TYPE_SUFFIX))
+            digests.update(content_digests({key: value if kind is None else np.frombuffer(value, dtype=kind)}))
+    group[DIGESTS] = digests
     binding = Binding(props["binding_id"], surface, rest.reshape(-1, 3), proxy,
                       surface.preview if preview is not None else None)
     _CACHE[binding.binding_id] = binding
@@ -477,7 +489,9 @@ class Opening:
             raise SkinDetachError(f"binding of {obj.name!r}: expected its arrays in the text datablock its record "
                                   f"points at, it was deleted or damaged; press Rebuild")
         self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
-                        if key not in ("proxy", "preview", STORE)}
+                        if key not in ("proxy", "preview", STORE, DIGESTS)}
+        digests = props.get(DIGESTS)
+        self._digests = None if digests is None else _read_digests(obj, digests)
         from . import rig_members
         self.rest = np.array(_checked_rest(obj, stored_arrays, rig_members.vertex_count(obj)))  # its own, not Blender's
         # Quads and ngons split as the rest shape splits (the skin was bound over those): a posed
@@ -524,6 +538,8 @@ class Opening:
             surface = surface_from_compact(_unpacked(main, source), self.rest, self._triangles, source,
                                            self._report(0.0, 0.5 if prepare else 1.0))
         self._triangles = None
+        if self._digests is not None:  # well-formed (the checks above passed), but what the build stored?
+            check_digests({**_unpacked(arrays, source), "rest": self.rest}, self._digests, source)
         preview = None
         if PREVIEW_PREFIX + "format_tag" in arrays:
             source = f"preview of {self.name!r}"
@@ -537,6 +553,14 @@ class Opening:
                 preview.surface.prepare_layout()
         self.fraction, self.stage = 1.0, "done"
         return surface, preview
+
+
+def _read_digests(obj, digests):
+    """{key: hex digest} of the record's :data:`DIGESTS` group (raises when it is not one)."""
+    if not hasattr(digests, "items") or not all(isinstance(value, str) for _, value in digests.items()):
+        raise SkinDetachError(f"binding of {obj.name!r} {DIGESTS}: expected a group of digests (strings), got "
+                              f"{type(digests).__name__}; press Rebuild")
+    return dict(digests.items())
 
 
 def _copied(props, key):

@@ -13,6 +13,7 @@ bit for bit the one the build made.
     surface_from_compact(arrays, points (n, 3), triangles (f, 3)) -> SkinDetachedSurface
 """
 
+import hashlib
 import json
 
 import numpy as np
@@ -34,6 +35,49 @@ CARRIER_TYPES = (np.int8, np.int16, np.int32)
 PROXY_REACH = 10.0
 #: Share of :func:`surface_from_compact`'s time each stage ends at (measured at 3.2M vertices).
 STAGES = (("welding the mesh", 0.45), ("binding the skin", 1.0))
+
+
+#: Elements hashed at a time by :func:`content_digests` (an integer array is widened to int64 a
+#: piece at a time).
+DIGEST_PIECE = 1 << 20
+
+
+def content_digests(arrays):
+    """{key: hex digest} of every value of ``arrays`` (a dict of numpy arrays, numbers, strings):
+    what a stored binding holds, to tell it from well-formed but other data on reading (a carrier
+    set to -1, a proxy vertex moved, a face flipped or dropped all pass the checks of shapes and
+    ranges and deform the mesh wrong). The digest is of the values, not of how they are stored:
+    integers of any width hash alike (as int64), floats as their own type, strings as UTF-8, every
+    array flat."""
+    digests = {}
+    for key in sorted(arrays):
+        value = arrays[key]
+        digest = hashlib.blake2b(digest_size=16)
+        if isinstance(value, (str, np.str_)) or (isinstance(value, np.ndarray) and value.dtype.kind in "US"):
+            digest.update(b"s" + str(value).encode("utf-8"))
+        else:
+            flat = np.asarray(value).ravel()
+            wide = np.dtype(np.int64) if flat.dtype.kind in "iub" else flat.dtype
+            digest.update(wide.str.encode("ascii"))
+            for a in range(0, flat.shape[0], DIGEST_PIECE):
+                digest.update(np.ascontiguousarray(flat[a:a + DIGEST_PIECE], dtype=wide).data)
+        digests[key] = digest.hexdigest()
+    return digests
+
+
+def check_digests(arrays, expected, source):
+    """Raise :class:`SkinDetachError` naming the first key of ``expected`` ({key: hex digest},
+    :func:`content_digests` of what was stored) whose value in ``arrays`` is missing or has another
+    digest: data changed after it was stored."""
+    for key in sorted(expected):
+        if key not in arrays:
+            raise SkinDetachError(f"{source} {key}: expected the stored values the build wrote, it is missing; "
+                                  f"rebuild the skin")
+        found = content_digests({key: arrays[key]})[key]
+        if found != expected[key]:
+            raise SkinDetachError(f"{source} {key}: expected the values the build stored (digest "
+                                  f"{expected[key][:12]}), got others (digest {found[:12]}): the binding was "
+                                  f"changed outside Skin Detach; rebuild the skin")
 
 
 def narrowest(values, low, high):
