@@ -507,12 +507,14 @@ def run_rigs(args):
 
 
 def angle_figures(points, triangles):
-    """Least / largest angle (degrees), % of faces under 10 degrees, faces under 1 and over 170."""
+    """Least / largest angle (degrees), % of faces under 10 degrees, faces under 1 and over 170, and
+    whether the proxy's goals are met (no angle under 1 degree, at most 1 % of faces under 10)."""
     angles = face_angles(points, triangles)
     least, largest = angles.min(axis=1), angles.max(axis=1)
+    under_10_pct, under_1 = 100 * float(np.mean(least < 10.0)), int(np.sum(least < 1.0))
     return dict(faces=int(triangles.shape[0]), least=float(least.min()), largest=float(largest.max()),
-                under_10_pct=100 * float(np.mean(least < 10.0)), under_1=int(np.sum(least < 1.0)),
-                over_170=int(np.sum(largest > 170.0)))
+                under_10_pct=under_10_pct, under_1=under_1, over_170=int(np.sum(largest > 170.0)),
+                goals_met=under_1 == 0 and under_10_pct <= 1.0)
 
 
 def decimated(points, triangles, faces):
@@ -559,7 +561,6 @@ def proxy_angle_rows(args):
         surface = SkinDetachedSurface.build(points, triangles, target_faces=args.faces)
         row = dict(mesh=name, vertices=int(points.shape[0]),
                    **angle_figures(surface.proxy_vertices, surface.proxy_faces))
-        row["goals_met"] = row["under_1"] == 0 and row["under_10_pct"] <= 1.0
         blender = decimated(points, triangles, row["faces"])
         if blender is not None:
             row["decimate"] = angle_figures(*blender)
