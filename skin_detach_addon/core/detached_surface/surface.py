@@ -183,8 +183,9 @@ class SkinDetachedSurface:
         #: The layout of the last rebuild asked for (its key made once, not once per drag move).
         self._layout = None
         self._seam_steps = SEAM_STEPS
-        #: Drop rows of recent selections (:meth:`_drop_rows_of`).
+        #: Drop rows of recent selections (:meth:`_drop_rows_of`), and their reach (by selection).
         self._drops = OrderedDict()
+        self._reaches = OrderedDict()
         self._corner_weights = None
         #: The diffused skin is made once, the free rebuild once, whichever thread asks first
         #: (a background job may be making it: :meth:`prepare_free_rebuild`).
@@ -211,6 +212,7 @@ class SkinDetachedSurface:
         self._seams = None
         self._rebuilds = {}
         self._drops.clear()
+        self._reaches.clear()
 
     def attach_topology(self, triangles, edges=None):
         """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), over
@@ -222,6 +224,7 @@ class SkinDetachedSurface:
         self._seams = None
         self._rebuilds = {}
         self._drops.clear()
+        self._reaches.clear()
 
     def _seam_weights(self):
         if self.triangles is None:
@@ -368,13 +371,21 @@ class SkinDetachedSurface:
         if not ids.size:
             return sp.csr_matrix((0, m))
         seams = self._seam_weights()
-        welded = np.unique(self.weld[ids])
-        reach = seams.reach(welded)
         digest = hashlib.blake2b(ids.tobytes(), digest_size=20)
-        digest.update(b"|" + reach[1][keep[reach[1]]].tobytes())
+        selection = digest.digest()
+        if selection not in self._reaches:  # a walk over the mesh's rings: once per selection, not per layout
+            welded = np.unique(self.weld[ids])
+            self._reaches[selection] = (welded, seams.reach(welded)[1])
+            while len(self._reaches) > KEPT_DROP_ROWS:
+                self._reaches.popitem(last=False)
+        self._reaches.move_to_end(selection)
+        welded, region = self._reaches[selection]
+        digest.update(b"|" + region[keep[region]].tobytes())
         key = digest.digest()
         if key not in self._drops:
-            skin = seams.skin_of(welded, keep, reach)
+            chosen = np.zeros(keep.shape[0], dtype=bool)
+            chosen[welded] = True
+            skin = seams.skin_of(welded, keep, (chosen, region))
             self._drops[key] = sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
             while len(self._drops) > KEPT_DROP_ROWS:
                 self._drops.popitem(last=False)
