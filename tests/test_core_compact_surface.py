@@ -101,3 +101,55 @@ def test_a_damaged_compact_record_is_refused_naming_the_field(damage, expected):
     with pytest.raises(SkinDetachError) as caught:
         surface_from_compact(arrays, points, tris, source="binding of 'box'")
     assert expected in str(caught.value) and "binding of 'box'" in str(caught.value), str(caught.value)
+
+
+def preview_cases(bundled):
+    """(points, triangles, built surface with a preview): the armadillo, and the riders' character
+    (a body with parts riding on it: its preview has riders)."""
+    from test_core_riders import character
+    points, tris = bundled("armadillo")
+    points, tris = points.astype(np.float32), tris.astype(np.int32)
+    yield points, tris, SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=3000)
+    points, tris, _ = character()
+    yield points, tris, SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=1500)
+
+
+def test_a_preview_made_from_its_compact_arrays_rebinds_bit_for_bit(bundled):
+    """Issue 52 item 4: the preview is stored as its points, triangles, carrier, representatives
+    and riders, its skin bound again on opening: the same skin, the same rebuilds."""
+    from skin_detach_addon.core.detached_surface.compact_surface import compact_preview_arrays, preview_from_compact
+    riders = 0
+    for points, tris, built in preview_cases(bundled):
+        preview = built.preview
+        assert preview is not None
+        arrays = compact_preview_arrays(preview)
+        assert not {f"skin_{name}" for name in SKIN} & arrays.keys() and "weld" not in arrays
+        made = preview_from_compact(arrays, built.proxy_vertices, built.proxy_faces, "preview of 'spot'")
+        same_surface(made.surface, preview.surface)
+        assert np.array_equal(made.points, preview.points) and np.array_equal(made.triangles, preview.triangles)
+        assert np.array_equal(made.representatives, preview.representatives)
+        riders += preview.surface.riders is not None
+        rng = np.random.default_rng(7)
+        moved = built.proxy_vertices + rng.normal(scale=0.02, size=built.proxy_vertices.shape)
+        groups = np.full(built.proxy_vertices.shape[0], -1)
+        groups[:5] = 0
+        for layout in ({}, {"groups": groups}):
+            assert np.array_equal(preview.surface.reconstruct(moved, **layout), made.surface.reconstruct(moved, **layout))
+    assert riders  # one case has riders: they come back too
+
+
+def test_a_damaged_compact_preview_is_refused_naming_the_field(bundled):
+    from skin_detach_addon.core.detached_surface.compact_surface import compact_preview_arrays, preview_from_compact
+    points, tris, built = next(preview_cases(bundled))
+    arrays = compact_preview_arrays(built.preview)
+    m = built.proxy_vertices.shape[0]
+    for key, value, expected in [("carrier", np.full(arrays["carrier"].shape, m, dtype=np.int32), "carrier: expected"),
+                                 ("carrier", arrays["carrier"][:-1], "carrier: expected"),
+                                 ("triangles", arrays["triangles"][:-1], "expected preview triangles matching"),
+                                 ("points", np.full_like(arrays["points"], np.nan), "points"),
+                                 ("format_version", np.array(9), "expected compact format version 1, got 9")]:
+        with pytest.raises(SkinDetachError, match=r"^preview of 'spot'.*" + expected):
+            preview_from_compact({**arrays, key: value}, built.proxy_vertices, built.proxy_faces, "preview of 'spot'")
+    with pytest.raises(SkinDetachError, match=r"preview of 'spot': expected arrays \['carrier'\], they are missing"):
+        preview_from_compact({k: v for k, v in arrays.items() if k != "carrier"}, built.proxy_vertices,
+                             built.proxy_faces, "preview of 'spot'")
