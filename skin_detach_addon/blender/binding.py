@@ -1,16 +1,22 @@
 """The binding of a mesh object, stored in the object's ID properties so it lives in the .blend.
 
 Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom Properties
-panel), schema 2: the schema version, a binding id, the mesh's topology fingerprint, the digest of
-the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest positions (3n
+panel), schema 3: the schema version, a binding id, the mesh's topology fingerprint, the digest of
+the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest positions ((n, 3)
 float32, the mesh's own vertex order) and what of the core surface cannot be recomputed quickly
 (:func:`.core.detached_surface.compact_surface.compact_arrays`: the proxy, the carrier in the
-narrowest integer type its range allows, stored as bytes because Blender's ID-property arrays hold
-int32 at the narrowest, the build figures), plus the preview's arrays whole (float64 or int32,
-flattened). Opening makes the skin again from the rest positions, the mesh's triangles and the
-carrier (:func:`.core.detached_surface.compact_surface.surface_from_compact`), bit for bit the one
-the build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
-once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
+narrowest integer type its range allows, the build figures), plus the preview's
+(:func:`.core.detached_surface.compact_surface.compact_preview_arrays`: its points, triangles,
+carrier and representatives). Every array of :data:`PACK_FROM` values or more, the rest positions
+first, is stored packed (:mod:`.core.packed_arrays`: bytes, lossless, about 72 % of float32
+positions where a .blend's own compression of the raw floats gets about 92 %); a smaller one as a
+flat int32 or float64 array, or an int8/int16 one as its bytes beside its type (Blender's
+ID-property arrays hold int32 at the narrowest). Opening makes the skin again from the rest
+positions, the mesh's triangles and the carrier
+(:func:`.core.detached_surface.compact_surface.surface_from_compact`), and the preview's from its
+own arrays, bit for bit the ones the build made. A record of schema 2 (the arrays whole, the
+preview's skin stored) is read as it is; one of schema 1 (the whole skin stored) is read as it is
+and rewritten compact once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
 id, so undo and reload find them again or rebuild them from the properties; after a file is
 opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
 that needs one before then waits for it.
