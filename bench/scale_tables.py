@@ -95,14 +95,16 @@ def large(rows):
                 ("peak MB", lambda r: f"{r['peak_mb']:.0f}")], rows))
 
 
-def files(rows):
+def files(rows, title="The bound file"):
+    """The file figures of the rows that have them (rows of the files part name their faces)."""
     rows = [r for r in rows if "files" in r]  # rows of results written before the file figures: none
     if not rows:
         return ""
-    return ("\n### The bound file\n\nThe rigged mesh of each row saved and opened (bpy's open_mainfile) with its binding, "
+    faces = [("faces", lambda r: r["faces"])] if all("faces" in r for r in rows) else []
+    return (f"\n### {title}\n\nThe rigged mesh of each row saved and opened (bpy's open_mainfile) with its binding, "
             "then without it (plain: the rig and the record removed); after opening, the seconds until it is "
             "prepared (the skin bound again and the layout prepared on the background thread, polled every 50 ms) "
-            "and the longest the main thread was held meanwhile.\n\n" + table([
+            "and the longest the main thread was held meanwhile.\n\n" + table(faces + [
                 ("vertices", lambda r: f"{r['vertices']:,}"),
                 ("save s", lambda r: f"{r['files']['save_s']:.2f}"),
                 (".blend MB (x plain)", lambda r: f"{r['files']['blend_mb']:.0f} ({r['files']['size_x']:.2f})"),
@@ -114,7 +116,9 @@ def files(rows):
 
 
 def tables(figures):
-    """The tables of every part in ``figures`` (dict: "table1", "side", "large" -> rows)."""
+    """The tables of every part in ``figures`` (dict: "table1", "side", "large", "files" -> rows)."""
     return ((table1(figures["table1"]) if figures.get("table1") else "") +
             "".join(side(row) for row in figures.get("side", [])) +
-            (large(figures["large"]) + files(figures["large"]) if figures.get("large") else ""))
+            (large(figures["large"]) + files(figures["large"]) if figures.get("large") else "") +
+            (files(figures["files"], "The bound file: triangles and quads (goal <= 1.3x the plain file)")
+             if figures.get("files") else ""))

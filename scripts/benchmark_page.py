@@ -5,7 +5,8 @@
 Reads ``drag.json`` (scripts/benchmark_drag.py --json), ``quality.json``
 (scripts/benchmark_quality.py --json), ``rigs.json`` (scripts/benchmark_quality.py --rigs --json),
 ``proxy_angles.json`` (scripts/benchmark_quality.py --proxy-angles --json), ``riders.json``
-(scripts/benchmark_riders.py --json) and ``scale.json`` (scripts/benchmark_scale.py --json) from the results folder (each that is
+(scripts/benchmark_riders.py --json), ``scale.json`` (scripts/benchmark_scale.py --json) and ``files.json``
+(scripts/benchmark_scale.py --parts files --json) from the results folder (each that is
 there), each with the command, date, machine and versions it was measured with (bench/report.py), and writes a section per benchmark, one table per measurement under that
 heading. ``make bench`` measures drag, quality, rigs and proxy angles and runs this; the scale benchmark is run by
 hand (long, and its large rows need a larger machine).
@@ -212,6 +213,10 @@ def scale_section(data):
             tables(data["rows"]))
 
 
+def files_section(data):
+    return ("## The bound file: triangles and quads\n\n" + heading(data["meta"]) + tables(data["rows"]))
+
+
 def page(results):
     parts = ["# Benchmarks\n\nThis page is written by `python scripts/benchmark_page.py` from the JSON in "
              "`bench/results/` (`make bench` measures the drag and the quality again and rewrites the page; the scale "
@@ -219,7 +224,7 @@ def page(results):
              "folder); do not edit it by hand.\n"]
     for name, render in (("drag.json", drag_section), ("quality.json", quality_section), ("rigs.json", rigs_section),
                          ("proxy_angles.json", proxy_angles_section), ("riders.json", riders_section),
-                         ("scale.json", scale_section)):
+                         ("scale.json", scale_section), ("files.json", files_section)):
         path = results / name
         if path.exists():
             parts.append(render(json.loads(path.read_text(encoding="utf-8"))))

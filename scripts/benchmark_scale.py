@@ -3,9 +3,9 @@
 api.add_handle, which prepare their layout through api.prepare; Deformation.step as the drag
 steps; api.DragSession as the modal operator drives it), printed as Markdown tables.
 
-    python scripts/benchmark_scale.py [--parts table1,side,large] [--table1 bunny,armadillo,bunny-418K]
+    python scripts/benchmark_scale.py [--parts table1,side,large,files] [--table1 bunny,armadillo,bunny-418K]
                                       [--side 50K,300K] [--large 800K,1.2M,1.8M,3.2M] [--steps 30]
-                                      [--preview-above N] [--quick] [--json PATH]
+                                      [--files 1.2M,1.2M-quads] [--preview-above N] [--quick] [--json PATH]
 
 Every mesh runs in its own process (bpy module), so each peak memory figure is that run's own.
 ``--quick`` is the CI run: the 50K armadillo once in every part, few steps.
@@ -35,6 +35,14 @@ anchor and handle (Add Anchor, Add Handle: each prepares its layout, so the drag
 median ms per mouse move with Blender's depsgraph update, and every confirm's seconds: the first
 drag, a second drag of the same handle, and a drag after a second handle is added (Add Handle
 timed; the first confirm of that layout), each with the stretch attribute's share.
+
+Files: the bound file against the plain one for a mesh of triangles and one of quads of about the
+same size (``--parts files`` runs it alone): the armadillo flat-subdivided (a size of the large
+part) or split into quads by Blender's Simple subdivision ("300K-quads", "1.2M-quads",
+"4.8M-quads": one, two or three levels, as an artist's quad mesh is), rotated and scaled as an
+OBJ import leaves it; api.build, the bend's anchor and handle added, the handle moved by a tenth
+of the mesh's width and api.deform; then bench/file_figures.py (the .blend's size against the
+same posed mesh saved without its rig).
 """
 
 import argparse
@@ -317,9 +325,46 @@ def large_row(spec, steps):
             "files": file_figures(obj)}  # last: it opens files (bench/file_figures.py)
 
 
+#: Quad meshes of the files part: name -> levels of Simple subdivision of the 50K armadillo.
+QUADS = {"300K-quads": 1, "1.2M-quads": 2, "4.8M-quads": 3}
+
+
+def files_row(spec, steps):
+    """The file figures (bench/file_figures.py) of the armadillo bound and posed by the bend, as
+    triangles (``spec`` a size of :data:`bench.meshes.SIZES`) or quads (``spec`` in :data:`QUADS`);
+    ``steps`` is not used."""
+    import bpy
+
+    from bench.scenario import bend_scenario
+    from skin_detach_addon import api
+    from skin_detach_addon.blender import mesh_io
+    fresh_scene()
+    if spec in QUADS:
+        obj = blender_mesh("armadillo", *subdivided("armadillo", ()))
+        modifier = obj.modifiers.new("simple", 'SUBSURF')
+        modifier.subdivision_type, modifier.levels = 'SIMPLE', QUADS[spec]
+        bpy.context.view_layer.objects.active = obj
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
+    else:
+        obj = blender_mesh("armadillo", *subdivided("armadillo", SIZES[spec]))
+    obj.rotation_euler, obj.scale = (np.pi / 2, 0.0, 0.0), (0.5, 0.5, 0.5)  # as an OBJ import leaves it
+    bpy.context.view_layer.update()
+    api.build(obj, target_faces=1000)
+    points = mesh_io.read_positions(obj.data)
+    scenario = bend_scenario(points.astype(np.float64))
+    api.add_anchor(obj, scenario.anchor_ids)
+    handle = api.add_handle(obj, scenario.handle_ids)
+    handle.location.x += 0.1 * float(np.ptp(points[:, 0]))
+    api.deform(obj)
+    sizes = np.empty(len(obj.data.polygons), dtype=np.int32)
+    obj.data.polygons.foreach_get("loop_total", sizes)
+    return {"size": spec, "faces": "quads" if (sizes == 4).all() else "triangles", "vertices": int(points.shape[0]),
+            "files": file_figures(obj)}
+
+
 def run_one(spec, steps):
     part, name = spec.split(":", 1)
-    return {"table1": table1_row, "side": side_row, "large": large_row}[part](name, steps)
+    return {"table1": table1_row, "side": side_row, "large": large_row, "files": files_row}[part](name, steps)
 
 
 def in_subprocess(spec, steps):
@@ -335,11 +380,13 @@ def in_subprocess(spec, steps):
 def main():
     from bench import report
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--parts", default="table1,side,large")
+    parser.add_argument("--parts", default="table1,side,large,files")
     parser.add_argument("--large", default="800K,1.2M,1.8M,3.2M")
     parser.add_argument("--table1", default="bunny,armadillo,bunny-418K")
     parser.add_argument("--side", default="50K,300K")
     parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--files", default="1.2M,1.2M-quads", help="files part: sizes of triangle meshes and of "
+                        f"quad meshes ({', '.join(QUADS)})")
     parser.add_argument("--preview-above", type=int, help="large part: meshes above this many vertices get a "
                         "preview (default: the add-on's Preview Above)")
     parser.add_argument("--quick", action="store_true", help="CI run: the 50K armadillo once per part, 5 steps")
@@ -350,18 +397,21 @@ def main():
         print(json.dumps(run_one(args.one, args.steps)))
         return
     if args.quick:
-        args.table1, args.side, args.large, args.steps = "armadillo-50K", "50K", "50K", 5
+        args.table1, args.side, args.large, args.steps, args.files = "armadillo-50K", "50K", "50K", 5, "300K-quads"
         args.preview_above = 10_000 if args.preview_above is None else args.preview_above  # the preview path too
     parts = [p for p in args.parts.split(",") if p]
-    unknown = set(parts) - {"table1", "side", "large"}
+    unknown = set(parts) - {"table1", "side", "large", "files"}
     if unknown:
-        parser.error(f"--parts: expected table1, side, large, got {', '.join(sorted(unknown))}")
+        parser.error(f"--parts: expected table1, side, large, files, got {', '.join(sorted(unknown))}")
+    for name in [n for n in args.files.split(",") if n] if "files" in parts else []:
+        if name not in QUADS and name not in SIZES:
+            parser.error(f"--files: expected sizes from {', '.join(SIZES)} or {', '.join(QUADS)}, got {name!r}")
     figures = {}
     for name in [n for n in args.table1.split(",") if n] if "table1" in parts else []:
         if name not in TABLE1:
             parser.error(f"--table1: expected names from {', '.join(TABLE1)}, got {name!r}")
     above = "" if args.preview_above is None else f"@{args.preview_above}"
-    for part, names in (("table1", args.table1), ("side", args.side), ("large", args.large)):
+    for part, names in (("table1", args.table1), ("side", args.side), ("large", args.large), ("files", args.files)):
         if part in parts:
             figures[part] = [in_subprocess(f"{part}:{name}{above if part == 'large' else ''}", args.steps)
                              for name in names.split(",") if name]

@@ -15,6 +15,7 @@ from blender_support import activate, import_spot, rig  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.api import SkinDetachError  # noqa: E402
 from skin_detach_addon.blender import baking, binding, handles  # noqa: E402
+from skin_detach_addon.core import packed_arrays  # noqa: E402
 
 
 def meshes():
@@ -62,12 +63,23 @@ def test_a_handle_moved_absurdly_far_writes_nothing(rigged):
 @pytest.mark.parametrize("field, value, expected", [
     ("proxy_vertices", np.nan, "proxy_vertices"), ("proxy_vertices", 1e300, "proxy_vertices"),
     ("carrier", 10_000, "carrier: expected proxy vertex ids in [-1, "), ("carrier", -2, "carrier: expected proxy"),
-    ("carrier_type", "float64", "carrier: expected bytes of one of"), ("carrier", b"\x01", "carrier: expected bytes")])
+    ("carrier", "inflates", "carrier: expected packed data that inflates"),
+    ("carrier", "truncated", "carrier: expected packed bytes of the length their header gives"), ("carrier", b"\x01", "carrier: expected packed bytes")])
 def test_crafted_stored_arrays_are_refused(rigged, field, value, expected):
     obj, handle = rigged
     group = binding.arrays_of(obj) if field in binding.arrays_of(obj) else obj[binding.KEY]
     stored = group[field]
-    if isinstance(stored, bytes) and not isinstance(value, bytes):
+    if value == "inflates":                                    # a byte of the packed zlib stream changed
+        stored = bytearray(stored)
+        stored[-3] ^= 0xFF
+        stored = bytes(stored)
+    elif value == "truncated":
+        stored = stored[:-10]
+    elif packed_arrays.is_packed(stored) and not isinstance(value, bytes):
+        values = binding.stored_array(stored, field).reshape(-1, 3 if field == "proxy_vertices" else 1).copy()
+        values[0] = value
+        stored = packed_arrays.pack(values)
+    elif isinstance(stored, bytes) and not isinstance(value, bytes):
         carrier = np.frombuffer(stored, dtype=obj[binding.KEY]["carrier_type"]).copy()
         carrier[0] = value
         stored = carrier.tobytes()
@@ -86,7 +98,7 @@ def test_crafted_stored_arrays_are_refused(rigged, field, value, expected):
 
 def test_crafted_rest_and_data_of_the_wrong_kind_are_refused(rigged):
     obj, _ = rigged
-    rest = np.array(binding.arrays_of(obj)["rest"])
+    rest = binding.stored_array(binding.arrays_of(obj)["rest"], "rest").copy()  # packed: stored back whole
     rest[5] = np.nan
     del binding.arrays_of(obj)["rest"]
     binding.arrays_of(obj)["rest"] = rest

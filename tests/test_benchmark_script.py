@@ -57,6 +57,10 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
     assert [d["handles_s"] is None for d in large["drags"]] == [False, True, False]  # Add Handle timed
     assert all(0 < d["stretch_s"] < d["confirm_s"] for d in large["drags"])
     assert large["preview_vertices"] > 0  # the quick run takes the preview path
+    quads = figures["files"][0]                          # the files part: a quad mesh, 300K
+    assert "### The bound file: triangles and quads" in run.stdout
+    assert quads["faces"] == "quads" and quads["vertices"] == 299_930 and quads["size"] == "300K-quads"
+    assert 1.0 < quads["files"]["size_x"] == quads["files"]["blend_mb"] / quads["files"]["plain_mb"] < 2.0
     found = dict(numbers(figures))
     assert len(found) > 30
     bad = {path: value for path, value in found.items() if not math.isfinite(value)}

@@ -9,6 +9,7 @@ from blender_support import activate, band, import_spot, rig, save_and_reopen, s
 
 from skin_detach_addon.blender import binding, binding_figures, handles, mesh_io, skin_rig  # noqa: E402
 from skin_detach_addon.core.proxy_solve import proxy_solves  # noqa: E402
+from skin_detach_addon.core import packed_arrays  # noqa: E402
 
 
 def test_build_makes_a_wire_proxy_in_its_own_collection_and_rebuild_replaces_it(scene):
@@ -62,11 +63,13 @@ def test_binding_is_stored_without_int64_or_pickles(scene):
     for key, value in list(props.items()) + list(binding.arrays_of(obj).items()):
         if hasattr(value, "typecode"):
             assert value.typecode in "ifd", key
-        elif isinstance(value, bytes):                         # a narrow integer array, its type beside it
+        elif isinstance(value, bytes) and packed_arrays.is_packed(value):  # packed (lossless, zlib)
+            assert binding.stored_array(value, key).dtype.kind in "if", key
+        elif isinstance(value, bytes):                         # a small narrow integer array, its type beside it
             assert props[key + binding.TYPE_SUFFIX] in ("int8", "int16"), key
         else:
             assert isinstance(value, (int, str, float)) or key in ("proxy", "settings", binding.STORE), key
-    assert props["schema_version"] == 2 and not set(binding.WHOLE_SKIN_KEYS) & set(props.keys())
+    assert props["schema_version"] == 3 and not set(binding.WHOLE_SKIN_KEYS) & set(props.keys())
 
 
 def test_the_bindings_arrays_live_on_a_text_datablock_that_goes_with_the_binding(scene):

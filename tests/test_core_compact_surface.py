@@ -107,14 +107,67 @@ def test_content_digests_are_of_the_values_not_of_how_they_are_stored():
     from skin_detach_addon.core.detached_surface.compact_surface import check_digests, content_digests
     carrier = np.array([3, -1, 7, 0])
     stored = content_digests({"carrier": carrier.astype(np.int16), "tag": "skin", "rest": np.ones((2, 3), np.float32)})
-    # The same values read back in another integer width, a 0-d string, a flat array: the same digests.
+    # The same values read back in another integer or float width, a 0-d string, a flat array: the
+    # same digests.
     assert content_digests({"carrier": carrier.astype(np.int32), "tag": np.array("skin"),
-                            "rest": np.ones(6, np.float32)}) == stored
+                            "rest": np.ones(6, np.float64)}) == stored
     check_digests({"carrier": carrier.astype(np.int8), "tag": "skin", "rest": np.ones(6, np.float32)}, stored, "b")
     for changed, key in (({"carrier": np.array([3, -1, 7, 1])}, "carrier"), ({"tag": "skim"}, "tag"),
-                         ({"rest": np.ones(6, np.float64)}, "rest"), ({"carrier": carrier[:3]}, "carrier")):
+                         ({"rest": np.full(6, 1.0 + 2.0 ** -23, np.float32)}, "rest"), ({"carrier": carrier[:3]}, "carrier")):
         arrays = {"carrier": carrier, "tag": "skin", "rest": np.ones(6, np.float32), **changed}
         with pytest.raises(SkinDetachError, match=rf"^b {key}: expected the values the build stored"):
             check_digests(arrays, stored, "b")
     with pytest.raises(SkinDetachError, match="b rest: expected the stored values the build wrote, it is missing"):
         check_digests({"carrier": carrier, "tag": "skin"}, stored, "b")
+
+
+def preview_cases(bundled):
+    """(points, triangles, built surface with a preview): the armadillo, and the riders' character
+    (a body with parts riding on it: its preview has riders)."""
+    from test_core_riders import character
+    points, tris = bundled("armadillo")
+    points, tris = points.astype(np.float32), tris.astype(np.int32)
+    yield points, tris, SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=3000)
+    points, tris, _ = character()
+    yield points, tris, SkinDetachedSurface.build(points, tris, target_faces=300, preview_vertices=1500)
+
+
+def test_a_preview_made_from_its_compact_arrays_rebinds_bit_for_bit(bundled):
+    """Issue 52 item 4: the preview is stored as its points, triangles, carrier, representatives
+    and riders, its skin bound again on opening: the same skin, the same rebuilds."""
+    from skin_detach_addon.core.detached_surface.compact_surface import compact_preview_arrays, preview_from_compact
+    riders = 0
+    for points, tris, built in preview_cases(bundled):
+        preview = built.preview
+        assert preview is not None
+        arrays = compact_preview_arrays(preview)
+        assert not {f"skin_{name}" for name in SKIN} & arrays.keys() and "weld" not in arrays
+        made = preview_from_compact(arrays, built.proxy_vertices, built.proxy_faces, "preview of 'spot'")
+        same_surface(made.surface, preview.surface)
+        assert np.array_equal(made.points, preview.points) and np.array_equal(made.triangles, preview.triangles)
+        assert np.array_equal(made.representatives, preview.representatives)
+        riders += preview.surface.riders is not None
+        rng = np.random.default_rng(7)
+        moved = built.proxy_vertices + rng.normal(scale=0.02, size=built.proxy_vertices.shape)
+        groups = np.full(built.proxy_vertices.shape[0], -1)
+        groups[:5] = 0
+        for layout in ({}, {"groups": groups}):
+            assert np.array_equal(preview.surface.reconstruct(moved, **layout), made.surface.reconstruct(moved, **layout))
+    assert riders  # one case has riders: they come back too
+
+
+def test_a_damaged_compact_preview_is_refused_naming_the_field(bundled):
+    from skin_detach_addon.core.detached_surface.compact_surface import compact_preview_arrays, preview_from_compact
+    points, tris, built = next(preview_cases(bundled))
+    arrays = compact_preview_arrays(built.preview)
+    m = built.proxy_vertices.shape[0]
+    for key, value, expected in [("carrier", np.full(arrays["carrier"].shape, m, dtype=np.int32), "carrier: expected"),
+                                 ("carrier", arrays["carrier"][:-1], "carrier: expected"),
+                                 ("triangles", arrays["triangles"][:-1], "expected preview triangles matching"),
+                                 ("points", np.full_like(arrays["points"], np.nan), "points"),
+                                 ("format_version", np.array(9), "expected compact format version 1, got 9")]:
+        with pytest.raises(SkinDetachError, match=r"^preview of 'spot'.*" + expected):
+            preview_from_compact({**arrays, key: value}, built.proxy_vertices, built.proxy_faces, "preview of 'spot'")
+    with pytest.raises(SkinDetachError, match=r"preview of 'spot': expected arrays \['carrier'\], they are missing"):
+        preview_from_compact({k: v for k, v in arrays.items() if k != "carrier"}, built.proxy_vertices,
+                             built.proxy_faces, "preview of 'spot'")

@@ -1,16 +1,22 @@
 """The binding of a mesh object, stored in the object's ID properties so it lives in the .blend.
 
 Stored under ``object["_skin_detach"]`` (the leading underscore hides it from the Custom Properties
-panel), schema 2: the schema version, a binding id, the mesh's topology fingerprint, the digest of
-the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest positions (3n
+panel), schema 3: the schema version, a binding id, the mesh's topology fingerprint, the digest of
+the positions Skin Detach last wrote, the proxy object (an ID pointer), the rest positions ((n, 3)
 float32, the mesh's own vertex order) and what of the core surface cannot be recomputed quickly
 (:func:`.core.detached_surface.compact_surface.compact_arrays`: the proxy, the carrier in the
-narrowest integer type its range allows, stored as bytes because Blender's ID-property arrays hold
-int32 at the narrowest, the build figures), plus the preview's arrays whole (float64 or int32,
-flattened). Opening makes the skin again from the rest positions, the mesh's triangles and the
-carrier (:func:`.core.detached_surface.compact_surface.surface_from_compact`), bit for bit the one
-the build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
-once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
+narrowest integer type its range allows, the build figures), plus the preview's
+(:func:`.core.detached_surface.compact_surface.compact_preview_arrays`: its points, triangles,
+carrier and representatives). Every array of :data:`PACK_FROM` values or more, the rest positions
+first, is stored packed (:mod:`.core.packed_arrays`: bytes, lossless, about 72 % of float32
+positions where a .blend's own compression of the raw floats gets about 92 %); a smaller one as a
+flat int32 or float64 array, or an int8/int16 one as its bytes beside its type (Blender's
+ID-property arrays hold int32 at the narrowest). Opening makes the skin again from the rest
+positions, the mesh's triangles and the carrier
+(:func:`.core.detached_surface.compact_surface.surface_from_compact`), and the preview's from its
+own arrays, bit for bit the ones the build made. A record of schema 2 (the arrays whole, the
+preview's skin stored) is read as it is; one of schema 1 (the whole skin stored) is read as it is
+and rewritten compact once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
 id, so undo and reload find them again or rebuild them from the properties; after a file is
 opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
 that needs one before then waits for it.
@@ -23,9 +29,11 @@ import uuid
 
 import numpy as np
 
-from ..core import threads
+from ..core import packed_arrays, threads
 from ..core.detached_surface import HeldPlacement, Preview, SkinDetachedSurface, SkinStretch
-from ..core.detached_surface.compact_surface import check_digests, compact_arrays, content_digests, surface_from_compact
+from ..core.detached_surface.compact_surface import (COMPACT_PREVIEW_TAG, check_digests, compact_arrays,
+                                                     compact_preview_arrays, content_digests, preview_from_compact,
+                                                     surface_from_compact)
 from ..core.detached_surface.held_detail import layout_of
 from ..core.detached_surface.surface import BACKGROUND_ABOVE
 from ..core.detached_surface.symmetry import MIRROR_TOLERANCE, is_own_mirror_image, mirror_map, symmetrize
@@ -48,9 +56,15 @@ PROXY_TAG = "_skin_detach_proxy_of"
 PREVIEW_TAG = "_skin_detach_preview_of"
 #: Stored arrays of the preview's skin carry this prefix.
 PREVIEW_PREFIX = "preview_"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: The schema whose records store the whole skin: read as they are and rewritten compact once.
 WHOLE_SKIN_SCHEMA = 1
+#: Schemas read: 1 (the whole skin), 2 (compact, the arrays whole: read as they are), 3 (compact,
+#: the arrays of at least :data:`PACK_FROM` values packed, :mod:`.core.packed_arrays`).
+READABLE_SCHEMAS = (WHOLE_SKIN_SCHEMA, 2, SCHEMA_VERSION)
+#: Arrays of at least this many values are stored packed (:func:`.core.packed_arrays.pack`:
+#: bytes, lossless, read back by :func:`stored_array`); smaller ones as they are.
+PACK_FROM = 1024
 #: An integer array narrower than int32 is stored as bytes under its key, its type under the key
 #: with this suffix (one of :data:`NARROW_TYPES`).
 TYPE_SUFFIX = "_type"
@@ -230,13 +244,16 @@ def has_binding(obj):
 
 def _flat_props(arrays, prefix=""):
     """(key, ID-property value) of each entry of a core ``to_arrays`` dict, made as it is asked
-    for: strings, scalars, int32 or float64 flat arrays, and an int8 or int16 array as its bytes
-    (its type under the key with :data:`TYPE_SUFFIX`)."""
+    for: strings, scalars, an array of at least :data:`PACK_FROM` values packed into bytes
+    (:func:`_packed`), a smaller one as int32 or float64 flat arrays, or an int8 or int16 one as
+    its bytes (its type under the key with :data:`TYPE_SUFFIX`)."""
     for key, value in arrays.items():
         if value.dtype.kind in "US":
             yield prefix + key, str(value)
         elif value.ndim == 0:
             yield prefix + key, value.item()
+        elif value.size >= PACK_FROM:
+            yield prefix + key, _packed(value)
         elif value.dtype.name in NARROW_TYPES:
             yield prefix + key + TYPE_SUFFIX, value.dtype.name
             yield prefix + key, np.ascontiguousarray(value).ravel().tobytes()
@@ -244,6 +261,44 @@ def _flat_props(arrays, prefix=""):
             yield prefix + key, value.astype(np.int32).ravel()
         else:
             yield prefix + key, np.asarray(value, dtype=np.float64).ravel()  # no copy when already float64
+
+
+def _packed(value):
+    """:func:`.core.packed_arrays.pack`'s bytes of ``value`` (k,) or (k, c): a float array whose
+    every value float32 holds exactly as float32 (the preview's points: the mesh's own floats),
+    an integer one in its own type, read back as the flat array (k * c,)."""
+    value = np.asarray(value)
+    if value.ndim != 2 or not 1 <= value.shape[1] <= packed_arrays.MOST_COLUMNS:
+        value = value.ravel()
+    if value.dtype.kind == "f" and value.dtype != np.float32:
+        narrow = value.astype(np.float32)
+        value = narrow if np.array_equal(narrow, value) else value.astype(np.float64)
+    elif value.dtype.kind in "iu" and value.dtype.name not in NARROW_TYPES:
+        value = value.astype(np.int32)  # as an array of this size was stored before
+    return packed_arrays.pack(value)
+
+
+def stored_array(value, source):
+    """The flat array stored as ``value``: a packed one (:func:`_packed`) unpacked, any other
+    (a Blender ID-property array, a list) as numpy's copy of it. Damage raises
+    :class:`SkinDetachError` naming ``source``."""
+    if packed_arrays.is_packed(value):
+        return packed_arrays.unpack(value, source)
+    if isinstance(value, (bytes, bytearray)):
+        raise SkinDetachError(f"{source}: expected packed bytes or an array, got {len(value)} bytes that are neither "
+                              f"(damaged); press Rebuild")
+    return np.array(value)
+
+
+def stored_length(value):
+    """The number of values stored as ``value`` (a packed array's header read, nothing unpacked),
+    or None when it is not an array."""
+    if packed_arrays.is_packed(value):
+        try:
+            return packed_arrays.packed_size(value)
+        except SkinDetachError:
+            return None
+    return len(value) if hasattr(value, "__len__") and not isinstance(value, (str, bytes)) else None
 
 
 def store(obj, surface, rest, proxy, preview=None, members=None, local_rest=None):
@@ -271,23 +326,25 @@ def store(obj, surface, rest, proxy, preview=None, members=None, local_rest=None
         group[rig_members.MEMBERS] = entries
     rig_members.tag(obj, members if several else [obj])
     arrays = _new_store(obj, group)
-    arrays["rest"] = rest
+    arrays["rest"] = packed_arrays.pack(rest.reshape(-1, 3))
     content = {"rest": rest}
     if several:
-        arrays[rig_members.LOCAL_REST] = content[rig_members.LOCAL_REST] = \
-            np.ascontiguousarray(local_rest, dtype=np.float32).ravel()
-    # The arrays one at a time: each copy goes once Blender holds its own.
-    entries = [_flat_props(compact_arrays(surface))]
+        content[rig_members.LOCAL_REST] = np.ascontiguousarray(local_rest, dtype=np.float32)
+        arrays[rig_members.LOCAL_REST] = packed_arrays.pack(content[rig_members.LOCAL_REST])
+    # The arrays one at a time: each copy goes once Blender holds its own. Their digests are of
+    # their values, whatever type and packing stores them.
+    compact = compact_arrays(surface)
+    content.update(compact)
+    entries = [_flat_props(compact)]
     if preview is not None:
         group["preview"] = preview
-        entries.append(_flat_props(surface.preview.to_arrays(), PREVIEW_PREFIX))
-    digests = content_digests(content)
+        previewed = compact_preview_arrays(surface.preview)
+        content.update((PREVIEW_PREFIX + key, value) for key, value in previewed.items())
+        entries.append(_flat_props(previewed, PREVIEW_PREFIX))
+    group[DIGESTS] = content_digests(content)
+    del content, compact
     for key, value in (entry for part in entries for entry in part):
         (arrays if _is_array(value) else group)[key] = value
-        if not key.endswith(TYPE_SUFFIX):  # digests of the values as they are read back (_unpacked)
-            kind = NARROW_TYPES.get(group.get(key + TYPE_SUFFIX))
-            digests.update(content_digests({key: value if kind is None else np.frombuffer(value, dtype=kind)}))
-    group[DIGESTS] = digests
     binding = Binding(props["binding_id"], surface, rest.reshape(-1, 3), proxy,
                       surface.preview if preview is not None else None)
     _CACHE[binding.binding_id] = binding
@@ -360,7 +417,7 @@ def _checked_record(obj):
         raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {WHOLE_SKIN_SCHEMA} to "
                               f"{SCHEMA_VERSION} (this version of Skin Detach), got {version}: the file was bound by "
                               f"a newer Skin Detach; update the add-on, or press Rebuild to bind it again here")
-    if version not in (WHOLE_SKIN_SCHEMA, SCHEMA_VERSION):
+    if version not in READABLE_SCHEMAS:
         raise SkinDetachError(f"object {obj.name!r}: expected binding schema version {SCHEMA_VERSION}, got {version}; "
                               f"press Rebuild")
     if obj.mode == 'EDIT' or obj.data.is_editmode:
@@ -476,7 +533,9 @@ class Opening:
 
     name      the object's name
     version   the record's schema version
-    rest      (n, 3) float32 rest positions (checked)
+    rest      (n, 3) float32 rest positions (checked): read here for a mesh of quads or ngons (its
+              split needs them), else unpacked by :meth:`make` (at 10M vertices unpacking takes
+              0.6-1 s, which the main thread is spared)
     fraction  how far :meth:`make` got, 0 to 1, and ``stage``, what it does
     """
 
@@ -493,7 +552,13 @@ class Opening:
         digests = props.get(DIGESTS)
         self._digests = None if digests is None else _read_digests(obj, digests)
         from . import rig_members
-        self.rest = np.array(_checked_rest(obj, stored_arrays, rig_members.vertex_count(obj)))  # its own, not Blender's
+        self._n = rig_members.vertex_count(obj)
+        stored_rest = stored_arrays.get("rest")
+        self.rest, self._packed_rest = None, None
+        if triangles is not None and packed_arrays.is_packed(stored_rest):
+            self._packed_rest = stored_rest  # bytes: Blender gave a copy
+        else:
+            self.rest = np.array(_checked_rest(obj, stored_arrays, self._n))  # its own, not Blender's
         # Quads and ngons split as the rest shape splits (the skin was bound over those): a posed
         # quad mesh's own split differs where a quad folded across its first diagonal.
         if triangles is None:
@@ -525,6 +590,9 @@ class Opening:
         """(:class:`SkinDetachedSurface` over the mesh, its :class:`Preview` or None) from what was
         read; with ``prepare``, their free rebuilds made too (what the first rebuild would pay)."""
         source = f"binding of {self.name!r}"
+        if self.rest is None:
+            self.rest = _rest_of(self.name, self._packed_rest, self._n)
+            self._packed_rest = None
         arrays = self._arrays
         main = {key: value for key, value in arrays.items() if not key.startswith(PREVIEW_PREFIX)}
         n = self.rest.shape[0]
@@ -535,16 +603,22 @@ class Opening:
                                       f"{surface.n_detail}; press Rebuild")
             surface.attach_topology(self._triangles)  # the topology was checked
         else:
-            surface = surface_from_compact(_unpacked(main, source), self.rest, self._triangles, source,
+            main = _unpacked({key: value for key, value in main.items() if key != "rest"}, source)  # unpacked already
+            surface = surface_from_compact(main, self.rest, self._triangles, source,
                                            self._report(0.0, 0.5 if prepare else 1.0))
         self._triangles = None
-        if self._digests is not None:  # well-formed (the checks above passed), but what the build stored?
-            check_digests({**_unpacked(arrays, source), "rest": self.rest}, self._digests, source)
-        preview = None
+        preview, stored = None, {}
         if PREVIEW_PREFIX + "format_tag" in arrays:
-            source = f"preview of {self.name!r}"
-            preview = Preview.from_arrays(_unpacked({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
-                                                     if key.startswith(PREVIEW_PREFIX)}, source), source=source)
+            stored = _unpacked({key[len(PREVIEW_PREFIX):]: value for key, value in arrays.items()
+                                if key.startswith(PREVIEW_PREFIX)}, f"preview of {self.name!r}")
+            if str(stored["format_tag"]) == COMPACT_PREVIEW_TAG:  # its skin bound again (schema 3)
+                preview = preview_from_compact(stored, surface.proxy_vertices, surface.proxy_faces,
+                                               f"preview of {self.name!r}")
+            else:  # stored whole (schema 2 and before)
+                preview = Preview.from_arrays(stored, source=f"preview of {self.name!r}")
+        if self._digests is not None:  # well-formed (the checks above passed), but what the build stored?
+            check_digests({**main, **{PREVIEW_PREFIX + key: value for key, value in stored.items()},
+                           "rest": self.rest}, self._digests, source)
         if prepare:
             self.fraction, self.stage = 0.5, "diffusing the skin"
             surface.prepare_layout()
@@ -573,8 +647,12 @@ def _copied(props, key):
 
 
 def _unpacked(arrays, source):
-    """``arrays`` with each array stored as bytes (:func:`_flat_props`) read back in its type."""
+    """``arrays`` with each array stored as bytes (:func:`_flat_props`) read back in its type:
+    packed ones unpacked, narrow ones (their type under the key with :data:`TYPE_SUFFIX`) viewed."""
     out = {key: value for key, value in arrays.items() if not key.endswith(TYPE_SUFFIX)}
+    for key, value in out.items():
+        if isinstance(value, (bytes, bytearray)) and key + TYPE_SUFFIX not in arrays:
+            out[key] = stored_array(value, f"{source} {key}")
     for key in [key for key in arrays if key.endswith(TYPE_SUFFIX)]:
         name, packed = arrays[key], arrays.get(key[:-len(TYPE_SUFFIX)])
         kind = NARROW_TYPES.get(name) if isinstance(name, str) else None
@@ -630,16 +708,24 @@ def _rewrite_compact(obj, surface):
 
 
 def _checked_rest(obj, props, n):
+    return _rest_of(obj.name, props.get("rest"), n)
+
+
+def _rest_of(name, value, n):
+    """(n, 3) float32 the rest positions stored as ``value`` in the binding of object ``name``:
+    packed (schema 3) or a whole float32 array (earlier schemas), bit for bit either way; checked."""
     try:
-        rest = np.asarray(props["rest"], dtype=np.float32).reshape(-1, 3)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise SkinDetachError(f"binding of {obj.name!r}: expected stored rest positions ({n}, 3), got unreadable "
+        if value is None:
+            raise ValueError("none stored")
+        rest = np.asarray(stored_array(value, f"binding of {name!r} rest"), dtype=np.float32).reshape(-1, 3)
+    except (TypeError, ValueError) as exc:
+        raise SkinDetachError(f"binding of {name!r}: expected stored rest positions ({n}, 3), got unreadable "
                               f"data ({exc}); press Rebuild") from None
     if rest.shape != (n, 3):
-        raise SkinDetachError(f"binding of {obj.name!r}: expected stored rest positions ({n}, 3), got {rest.shape}; "
+        raise SkinDetachError(f"binding of {name!r}: expected stored rest positions ({n}, 3), got {rest.shape}; "
                               f"press Rebuild")
     if not np.isfinite(rest).all():
-        raise SkinDetachError(f"binding of {obj.name!r}: expected finite stored rest positions, got NaN or inf; "
+        raise SkinDetachError(f"binding of {name!r}: expected finite stored rest positions, got NaN or inf; "
                               f"press Rebuild")
     return rest
 

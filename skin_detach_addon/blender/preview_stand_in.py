@@ -26,8 +26,9 @@ def preview_of(obj):
     if preview is None or preview.type != 'MESH' or preview.get(stored.PREVIEW_TAG) != obj:
         return None
     arrays = stored.arrays_of(obj)
-    count = None if arrays is None else arrays.get(stored.PREVIEW_PREFIX + "weld")
-    if count is None or len(preview.data.vertices) != len(count):
+    # one carrier per preview vertex, whether the preview is stored whole (schema 2) or compact
+    count = None if arrays is None else stored.stored_length(arrays.get(stored.PREVIEW_PREFIX + "carrier"))
+    if count is None or len(preview.data.vertices) != count:
         return None
     return preview
 

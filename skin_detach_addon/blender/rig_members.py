@@ -270,7 +270,8 @@ def local_rest(owner):
     flat = None if arrays is None else arrays.get(LOCAL_REST)
     n = int(counts(owner).sum())
     try:
-        rest = np.asarray(flat, dtype=np.float32).reshape(n, 3)
+        rest = np.asarray(stored.stored_array(flat, f"binding of {owner.name!r} {LOCAL_REST}"),
+                          dtype=np.float32).reshape(n, 3)
     except (TypeError, ValueError):
         raise SkinDetachError(f"binding of {owner.name!r}: expected the members' rest positions ({n}, 3), got "
                               f"unreadable data; press Rebuild") from None

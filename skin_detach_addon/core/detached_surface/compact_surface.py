@@ -11,6 +11,11 @@ bit for bit the one the build made.
 
     arrays = compact_arrays(surface)
     surface_from_compact(arrays, points (n, 3), triangles (f, 3)) -> SkinDetachedSurface
+
+A :class:`.surface.Preview` is kept likewise (:func:`compact_preview_arrays`): its points,
+triangles, carrier, representatives and riders; its skin is bound again from them over the
+detail's proxy (:func:`preview_from_compact`), as the build bound it: the vertex normals of its own
+triangles, the same :func:`.skin.bind_skin`.
 """
 
 import hashlib
@@ -19,13 +24,16 @@ import json
 import numpy as np
 
 from ..errors import SkinDetachError
-from ..geometry import half_edge_graph
+from ..geometry import half_edge_graph, vertex_normals
 from .prepared_mesh import prepare_mesh
 from .skin import bind_skin, check_coefficients
-from .surface import SkinDetachedSurface, topology_fingerprint
+from .surface import FORMAT_TAG, FORMAT_VERSION, Preview, SkinDetachedSurface, topology_fingerprint
 from ..validation import as_points, as_triangles
 
 COMPACT_TAG = "skin_detach_compact_surface"
+#: Tag of a preview kept compact (:func:`compact_preview_arrays`); a preview stored whole has
+#: :data:`.surface.FORMAT_TAG`.
+COMPACT_PREVIEW_TAG = "skin_detach_compact_preview"
 #: Version of the compact arrays; others are refused.
 COMPACT_VERSION = 1
 #: Integer types a carrier may be stored in, narrowest first.
@@ -47,8 +55,8 @@ def content_digests(arrays):
     what a stored binding holds, to tell it from well-formed but other data on reading (a carrier
     set to -1, a proxy vertex moved, a face flipped or dropped all pass the checks of shapes and
     ranges and deform the mesh wrong). The digest is of the values, not of how they are stored:
-    integers of any width hash alike (as int64), floats as their own type, strings as UTF-8, every
-    array flat."""
+    numbers of any type hash alike (integers as int64, floats as float64: a float32 value is a float64
+    one exactly), strings as UTF-8, every array flat."""
     digests = {}
     for key in sorted(arrays):
         value = arrays[key]
@@ -57,7 +65,7 @@ def content_digests(arrays):
             digest.update(b"s" + str(value).encode("utf-8"))
         else:
             flat = np.asarray(value).ravel()
-            wide = np.dtype(np.int64) if flat.dtype.kind in "iub" else flat.dtype
+            wide = np.dtype(np.int64) if flat.dtype.kind in "iub" else np.dtype(np.float64)
             digest.update(wide.str.encode("ascii"))
             for a in range(0, flat.shape[0], DIGEST_PIECE):
                 digest.update(np.ascontiguousarray(flat[a:a + DIGEST_PIECE], dtype=wide).data)
@@ -186,3 +194,58 @@ def _checked(arrays, source):
     if not isinstance(stats, dict):
         raise SkinDetachError(f"{source}: expected the build figures as a JSON object, got {type(stats).__name__}")
     return proxy_vertices, proxy_faces, carrier.astype(np.int64), str(arrays["fingerprint"]), stats
+
+
+def compact_preview_arrays(preview):
+    """Dict of plain arrays that :func:`preview_from_compact` reads back: the preview's points
+    (c, 3) float64, triangles (q, 3) int32, carrier (c,) int32, representatives (c,) int64 when it
+    has them, its riders, the fingerprint and figures; not its skin, nor the proxy (the detail's)."""
+    surface = preview.surface
+    arrays = {"format_tag": np.array(COMPACT_PREVIEW_TAG), "format_version": np.array(COMPACT_VERSION),
+              "points": preview.points, "triangles": np.asarray(preview.triangles).astype(np.int32),
+              "carrier": np.asarray(surface.carrier).astype(np.int32), "fingerprint": np.array(surface.fingerprint),
+              "stats": np.array(json.dumps(surface.stats)), **surface.rider_arrays()}
+    if preview.representatives is not None:
+        arrays["representatives"] = preview.representatives
+    return arrays
+
+
+def preview_from_compact(arrays, proxy_vertices, proxy_faces, source="arrays"):
+    """The :class:`.surface.Preview` of ``arrays`` (:func:`compact_preview_arrays`) over the
+    detail's proxy ``proxy_vertices`` (m, 3) and ``proxy_faces`` (k, 3), its skin bound again as
+    the build bound it; the result is checked as :meth:`.surface.Preview.from_arrays` checks a
+    preview stored whole. Anything malformed raises :class:`SkinDetachError` naming ``source``."""
+    if str(arrays.get("format_tag", "")) != COMPACT_PREVIEW_TAG:
+        raise SkinDetachError(f"{source}: expected format_tag {COMPACT_PREVIEW_TAG!r}, got "
+                              f"{str(arrays.get('format_tag'))!r}; rebuild the skin")
+    missing = {"points", "triangles", "carrier", "fingerprint", "stats"} - arrays.keys()
+    if missing:
+        raise SkinDetachError(f"{source}: expected arrays {sorted(missing)}, they are missing; rebuild the skin")
+    try:
+        version = int(arrays.get("format_version", -1))
+        points = as_points(f"{source} points", np.asarray(arrays["points"], dtype=np.float64).reshape(-1, 3))
+        faces = np.asarray(arrays["triangles"])
+        carrier = np.asarray(arrays["carrier"])
+        if faces.dtype.kind not in "iu" or carrier.dtype.kind not in "iu":
+            raise SkinDetachError(f"{source} triangles and carrier: expected integers, got {faces.dtype} and "
+                                  f"{carrier.dtype}; rebuild the skin")
+        triangles = as_triangles(f"{source} triangles", faces.astype(np.int64).reshape(-1, 3), points.shape[0])
+        carrier = carrier.astype(np.int64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise SkinDetachError(f"{source}: expected the compact arrays of a preview, got malformed data "
+                              f"({type(exc).__name__}: {exc}); rebuild the skin") from None
+    if version != COMPACT_VERSION:
+        raise SkinDetachError(f"{source}: expected compact format version {COMPACT_VERSION}, got {version}; "
+                              f"rebuild the skin")
+    c, m = points.shape[0], proxy_vertices.shape[0]
+    if carrier.shape != (c,) or (carrier.size and (carrier.min() < -1 or carrier.max() >= m)):
+        raise SkinDetachError(f"{source} carrier: expected ({c},) proxy vertex ids in [-1, {m}), got {carrier.shape} "
+                              f"in [{carrier.min(initial=0)}, {carrier.max(initial=0)}]; rebuild the skin")
+    skin, _ = bind_skin(points, vertex_normals(points, triangles), carrier, proxy_vertices, proxy_faces)
+    whole = {f"skin_{name}": getattr(skin, name) for name in ("vertex", "face", "bary", "height", "weight", "case")}
+    whole.update({key: arrays[key] for key in ("fingerprint", "stats", "representatives", "rider_ids",
+                                               "rider_starts", "still_ids") if key in arrays})
+    whole.update(format_tag=np.array(FORMAT_TAG), format_version=np.array(FORMAT_VERSION), points=points,
+                 triangles=triangles, proxy_vertices=proxy_vertices, proxy_faces=proxy_faces, weld=np.arange(c),
+                 carrier=carrier)
+    return Preview.from_arrays(whole, source)
