@@ -17,6 +17,7 @@ from blender_support import DATA, imported_limb  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.api import SkinDetachError  # noqa: E402
 from skin_detach_addon.blender import binding, mesh_io  # noqa: E402
+from skin_detach_addon.core import packed_arrays  # noqa: E402
 
 
 def reopen(path, name):
@@ -31,37 +32,48 @@ def stored(obj):
     return binding.arrays_of(obj), obj[binding.KEY]
 
 
-def carrier_to_minus_one(obj):
+def get(obj, key):
+    """The values stored under ``key`` (unpacked, or viewed in their narrow type)."""
     arrays, record = stored(obj)
-    kind = binding.NARROW_TYPES[record["carrier_type"]] if "carrier_type" in record else np.int32
-    packed = arrays["carrier"]
-    values = np.full(len(packed) // np.dtype(kind).itemsize if isinstance(packed, bytes) else len(packed), -1, kind)
-    arrays["carrier"] = values.tobytes() if isinstance(packed, bytes) else values.astype(np.int32)
+    narrow = {key + binding.TYPE_SUFFIX: record[key + binding.TYPE_SUFFIX]} if key + binding.TYPE_SUFFIX in record else {}
+    return np.array(binding._unpacked({key: arrays[key], **narrow}, key)[key])
+
+
+def put(obj, key, values):
+    """Store ``values`` under ``key`` as the old value was stored (packed, narrow bytes or an array)."""
+    arrays, record = stored(obj)
+    old = arrays[key]
+    del arrays[key]  # a bytes value assigned over one is cut at its first zero byte
+    if packed_arrays.is_packed(old):
+        arrays[key] = binding._packed(values)
+    elif key + binding.TYPE_SUFFIX in record:
+        arrays[key] = values.astype(binding.NARROW_TYPES[record[key + binding.TYPE_SUFFIX]]).tobytes()
+    else:
+        arrays[key] = values.astype(np.array(old).dtype).ravel()
+
+
+def carrier_to_minus_one(obj):
+    put(obj, "carrier", np.full(get(obj, "carrier").shape, -1))
 
 
 def faces_flipped(obj):
-    arrays, _ = stored(obj)
-    faces = np.array(arrays["proxy_faces"]).reshape(-1, 3)
-    arrays["proxy_faces"] = faces[:, ::-1].astype(np.int32).ravel()
+    put(obj, "proxy_faces", get(obj, "proxy_faces").reshape(-1, 3)[:, ::-1].copy())
 
 
 def vertex_moved(obj):
-    arrays, _ = stored(obj)
-    points = np.array(arrays["proxy_vertices"]).reshape(-1, 3)
+    points = get(obj, "proxy_vertices").reshape(-1, 3)
     points[0] += 0.05 * np.ptp(points, axis=0).max()
-    arrays["proxy_vertices"] = points.ravel()
+    put(obj, "proxy_vertices", points)
 
 
 def face_dropped(obj):
-    arrays, _ = stored(obj)
-    arrays["proxy_faces"] = np.array(arrays["proxy_faces"])[3:].astype(np.int32)
+    put(obj, "proxy_faces", get(obj, "proxy_faces")[3:])
 
 
 def rest_nudged(obj):
-    arrays, _ = stored(obj)
-    rest = np.array(arrays["rest"], dtype=np.float32)
+    rest = get(obj, "rest").astype(np.float32).reshape(-1, 3)
     rest[7] += np.float32(1e-3)
-    arrays["rest"] = rest
+    put(obj, "rest", rest)
 
 
 @pytest.mark.parametrize("change, key", [(carrier_to_minus_one, "carrier"), (faces_flipped, "proxy_faces"),
@@ -94,10 +106,9 @@ def test_a_rig_of_several_objects_opens_with_its_digests_and_refuses_a_changed_m
     obj = reopen(tmp_path / "several.blend", "limb")
     assert binding.open_binding(obj) is not None
     binding._CACHE.clear()
-    arrays, _ = stored(obj)
-    local = np.array(arrays[rig_members.LOCAL_REST], dtype=np.float32)
+    local = get(obj, rig_members.LOCAL_REST).astype(np.float32).reshape(-1, 3)
     local[-1] += np.float32(0.01)
-    arrays[rig_members.LOCAL_REST] = local
+    put(obj, rig_members.LOCAL_REST, local)
     with pytest.raises(SkinDetachError, match=rig_members.LOCAL_REST):
         binding.open_binding(obj)
 
