@@ -88,7 +88,7 @@ def test_an_opened_file_is_prepared_in_idle_time_and_its_first_drag_uses_it(scen
     assert len(solvers) == 1 and len(rebuilds) == 1 and len(previews) == 1
     record = binding.open_binding(obj)  # with the float32 copies the drag's buffers multiply
     assert all(rebuild.float32_ready for surface in (record.surface, record.preview.surface)
-               for rebuild in [surface._free, *surface._rebuilds.values()])
+               for rebuild in [surface._free, *surface._rebuilds.values()] if rebuild is not None)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=1000)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
     assert session.event("RET", "PRESS", (130, 80)) == FINISHED
