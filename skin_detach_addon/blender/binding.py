@@ -11,9 +11,9 @@ flattened). Opening makes the skin again from the rest positions, the mesh's tri
 carrier (:func:`.core.detached_surface.compact_surface.surface_from_compact`), bit for bit the one
 the build made; a record of schema 1 (the whole skin stored) is read as it is and rewritten compact
 once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
-id, so undo and reload find them again or rebuild them from the properties; after a file is
-opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
-that needs one before then waits for it.
+id, so undo finds them again or rebuilds them from the properties; opening another file drops
+them (:func:`drop_all`). After a file is opened they are made on a background thread
+(:class:`Opening`, :mod:`.background`), and a step that needs one before then waits for it.
 What reads or changes the record for one purpose has its own module: the preview standing in
 for the mesh (:mod:`.preview_stand_in`), the figures the panel shows (:mod:`.binding_figures`).
 """
