@@ -36,7 +36,7 @@ from .core.validation import as_vertex_ids
 __all__ = ["SkinDetachError", "build", "start_build", "finish_build", "BuildJob", "BuildCancelled", "add_handle", "add_anchor", "deform", "reset", "clear", "bake",
            "is_bound", "preview_stands_in", "handles_of", "mesh_of", "is_handle", "handle_kind", "handle_vertex_count", "proxy_of",
            "remove_handle", "handle_conflicts", "set_parts", "part_overrides", "is_rig_part", "preparing", "finish_preparing", "handle_group", "rest_positions", "figures", "bound_objects", "selected_vertices", "frame_list",
-           "bake_file_path", "shutdown", "prepare_in_background", "check_output_file", "DragSession", "is_dragged", "moved_matrix", "mirror_twin",
+           "bake_file_path", "shutdown", "before_load", "handlers", "prepare_in_background", "check_output_file", "DragSession", "is_dragged", "moved_matrix", "mirror_twin",
            "handle_mirror", "members", "member_ranges", "orphan_owner", "clear_orphan", "before_save", "HANDLE", "ANCHOR", "SHAPE_KEYS", "OBJECTS", "FILES", "DRAG_TOL",
            "SETTLE_TOL", "PREVIEW_ABOVE", "RUNNING", "FINISHED", "CANCELLED"]
 
@@ -613,10 +613,29 @@ def selected_vertices(context):
 
 
 def shutdown():
-    """Stop the core's worker threads (unregistering the add-on calls it; they start again when
-    next needed) and the handlers that keep mesh fingerprints."""
+    """Cancel the background work and stop the core's worker threads (unregistering the add-on
+    calls it; they start again when next needed), and drop the kept mesh fingerprints."""
     threads.shutdown()
-    mesh_io.stop_watching()
+    mesh_io.forget_all()
+
+
+def before_load(*_args):
+    """A file is about to be opened (a ``load_pre`` handler): the background work of the file
+    open now (its build, its preparation) is cancelled, and what was made for its bindings
+    dropped, so the next file's preparation starts at once."""
+    threads.cancel_all()
+    stored.drop_all()
+
+
+before_load._bpy_persistent = True  # kept across file loads (bpy.app.handlers.persistent)
+
+
+def handlers():
+    """(handler list of ``bpy.app.handlers``, function) pairs the add-on installs for this layer
+    (its register, in one place with the interface's): :func:`before_load`, and the handlers that
+    drop kept mesh fingerprints when Blender may have changed a mesh's geometry (first: the
+    interface's handlers read fingerprints)."""
+    return mesh_io.HANDLERS + (("load_pre", before_load),)
 
 
 def frame_list(frames):

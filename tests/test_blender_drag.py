@@ -163,9 +163,9 @@ def test_unregister_leaves_nothing_behind(scene):
     try:
         assert not [t.name for t in threading.enumerate() if t.name.startswith("skin_detach")]
         handlers = bpy.app.handlers
-        modules = [f.__module__ for f in handlers.depsgraph_update_post + handlers.frame_change_post +
-                   handlers.save_pre + handlers.load_post]
-        assert not any(module.startswith("skin_detach_addon") for module in modules)
+        lists = [getattr(handlers, name) for name in dir(handlers) if isinstance(getattr(handlers, name), list)]
+        modules = [f.__module__ for functions in lists for f in functions]
+        assert len(lists) > 10 and not any(module.startswith("skin_detach_addon") for module in modules)
         assert not hasattr(bpy.types, "VIEW3D_MT_skin_detach")
         assert not hasattr(bpy.types.Scene, "skin_detach")
         assert not hasattr(bpy.types, "SKIN_DETACH_OT_build") and not hasattr(bpy.types, "VIEW3D_PT_skin_detach")

@@ -17,9 +17,9 @@ from skin_detach_addon.ui import idle_preparation  # noqa: E402
 def _prepared(obj):
     """(solver keys, the mesh's rebuild keys, the preview's rebuild keys) held by the binding."""
     record = binding.open_binding(obj)
-    # The free rebuild (key None), made with the binding, is every layout's base: not a layout.
-    preview = set() if record.preview is None else set(record.preview.surface._rebuilds) - {None}
-    return set(record.solves._solvers), set(record.surface._rebuilds) - {None}, preview
+    # The free rebuild, made with the binding, is every layout's base: not a layout (not among them).
+    preview = set() if record.preview is None else set(record.preview.surface._rebuilds)
+    return set(record.solves._solvers), set(record.surface._rebuilds), preview
 
 
 def _rigged(obj):
@@ -59,7 +59,7 @@ def test_a_prepared_layout_gives_bit_for_bit_what_an_unprepared_one_gives(scene)
     prepared = mesh_io.read_positions(obj.data).copy()
     record = binding.open_binding(obj)
     record.solves._solvers.clear()
-    record.surface._rebuilds = {None: record.surface._rebuilds[None]}
+    record.surface._rebuilds = {}
     api.deform(obj)
     assert np.array_equal(mesh_io.read_positions(obj.data), prepared)
 
@@ -88,7 +88,7 @@ def test_an_opened_file_is_prepared_in_idle_time_and_its_first_drag_uses_it(scen
     assert len(solvers) == 1 and len(rebuilds) == 1 and len(previews) == 1
     record = binding.open_binding(obj)  # with the float32 copies the drag's buffers multiply
     assert all(rebuild.float32_ready for surface in (record.surface, record.preview.surface)
-               for rebuild in surface._rebuilds.values())
+               for rebuild in [surface._free, *surface._rebuilds.values()] if rebuild is not None)
     session = DragSession(obj, handle, TopView(0.01), (100, 100), preview_above=1000)
     session.event("MOUSEMOVE", "NOTHING", (130, 80))
     assert session.event("RET", "PRESS", (130, 80)) == FINISHED

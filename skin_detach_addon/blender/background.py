@@ -1,9 +1,10 @@
 """The preparation of a bound mesh after its file is opened, its numpy and scipy work on the
-background thread (:func:`.core.threads.background`) so Blender's window answers events meanwhile,
+background thread (:func:`.core.threads.submit`) so Blender's window answers events meanwhile,
 its reads and writes of Blender data on the main thread, in :meth:`Preparation.poll` (a timer's
 tick). First the binding is made (:class:`.binding.Opening`: the skin bound again, the free
 rebuilds), then the handles' layout is prepared (:meth:`.deformation.Deformation.preparation`).
-A step asked for meanwhile (:func:`.binding.open_binding`) waits for what is under way.
+A step asked for meanwhile (:func:`.binding.open_binding`) waits for what is under way. Opening
+another file cancels it (:func:`.core.threads.cancel_all`): the next file's starts at once.
 """
 
 import time
@@ -31,7 +32,7 @@ class Preparation:
         self.preserve_volume = preserve_volume
         self.started = time.perf_counter()
         self._opening = stored.begin_opening(obj)  # reads the record and the mesh here
-        self._future = None
+        self._job = None
         self._layout = False
         self._fraction, self.stage = 0.0, "reading"
 
@@ -56,26 +57,32 @@ class Preparation:
             self.stage = self._opening.stage
             if not self._opening.done():
                 return False
+            if self._opening.cancelled:  # its file was closed, or the add-on unregistered
+                return True
             self._opening = None
-        if self._future is None:  # the symmetry checks the layout's reading asks for, made in the background
+        if self._job is None:  # the symmetry checks the layout's reading asks for, made in the background
             binding = stored.open_binding(obj)  # takes what the background made: cached, an old record rewritten
-            self._future = binding.busy = threads.background(_own_images, binding, _asked_images(obj, binding))
+            self._job = binding.busy = threads.submit(_own_images, binding, _asked_images(obj, binding),
+                                                      name=f"the symmetry checks of {self.name!r}")
             self.stage = "symmetry"
             return False
-        if not self._future.done():
+        if not self._job.done():
             return False
-        self._future.result()
+        if self._job.cancelled:
+            return True
+        self._job.result()
         if not self._layout:
             self._layout = True
             binding = stored.open_binding(obj)
             work = Deformation(obj, self.preserve_volume, require_unedited=False).preparation()
             if work is None:
                 return True
-            self._future = binding.busy = threads.background(work, self._report)
+            self._job = binding.busy = threads.submit(work, self._report, name=f"the layout of {self.name!r}")
             return False
         return True
 
     def _report(self, fraction, stage):
+        threads.checkpoint()
         self._fraction, self.stage = fraction, stage
 
 

@@ -17,14 +17,15 @@ positions, the mesh's triangles and the carrier
 own arrays, bit for bit the ones the build made. A record of schema 2 (the arrays whole, the
 preview's skin stored) is read as it is; one of schema 1 (the whole skin stored) is read as it is
 and rewritten compact once. Nothing is pickled or evaluated. The core objects rebuilt from it are cached per binding
-id, so undo and reload find them again or rebuild them from the properties; after a file is
-opened they are made on a background thread (:class:`Opening`, :mod:`.background`), and a step
-that needs one before then waits for it.
+id, so undo finds them again or rebuilds them from the properties; opening another file drops
+them (:func:`drop_all`). After a file is opened they are made on a background thread
+(:class:`Opening`, :mod:`.background`), and a step that needs one before then waits for it.
 What reads or changes the record for one purpose has its own module: the preview standing in
 for the mesh (:mod:`.preview_stand_in`), the figures the panel shows (:mod:`.binding_figures`).
 """
 
 import concurrent.futures
+import threading
 import uuid
 
 import numpy as np
@@ -113,8 +114,10 @@ class Binding:
         self._diagonal = None
         self.mesh_guard = MeshGuard()
         self._stretch = None
-        #: The Future of a preparation of this binding running on the background thread, or None
-        #: (:mod:`.background`); :func:`open_binding` waits for it before anything uses the binding.
+        self._stretch_lock = threading.Lock()
+        #: The :class:`.core.threads.Job` of a preparation of this binding running on the
+        #: background thread, or None (:mod:`.background`); :func:`open_binding` waits for it
+        #: before anything uses the binding.
         self.busy = None
 
     def stretch(self, proxy_vertices):
@@ -124,8 +127,12 @@ class Binding:
         return self._skin_stretch()(proxy_vertices)
 
     def _skin_stretch(self):
+        """The :class:`SkinStretch` of the surface, made once whichever thread asks first (the
+        background's, a pool's, the main one); the others wait for it."""
         if self._stretch is None:
-            self._stretch = SkinStretch(self.surface)
+            with self._stretch_lock:
+                if self._stretch is None:
+                    self._stretch = SkinStretch(self.surface)
         return self._stretch
 
     def mirror_map(self, axis):
@@ -200,7 +207,7 @@ class Binding:
         # it; a confirm may).
         background = self.preview is not None and self.surface.n_detail >= BACKGROUND_ABOVE
         if background and self._stretch is None:
-            threads.background(self._skin_stretch)
+            threads.submit(self._skin_stretch, watched=False, name=f"the stretch of {self.binding_id}")
         else:
             self._skin_stretch()
         self.surface.prepare_layout(layout.groups, layout.held or None, float32=True, background=background)
@@ -460,7 +467,7 @@ def open_binding(obj):
     binding = _CACHE.get(binding_id)
     if binding is None:
         opening = _PENDING.get(binding_id)
-        if opening is None or opening.name != obj.name:
+        if opening is None or opening.name != obj.name or opening.cancelled:
             opening = Opening(obj, props, binding_id, triangles)
         try:
             surface, preview = opening.made()
@@ -471,7 +478,10 @@ def open_binding(obj):
             _rewrite_compact(obj, surface)
         _CACHE[binding.binding_id] = binding
     if binding.busy is not None:
-        _wait(binding.busy, lambda: 0.5)  # its error, if any, is the background preparation's to report
+        try:  # its error, if not reported yet, is this step's
+            _wait(binding.busy, lambda: 0.5)
+        except threads.Cancelled:  # not prepared: the step makes what it needs
+            pass
         binding.busy = None
     binding.proxy = proxy  # never keep a Blender reference across undo or reload
     _adopt_world_parenting(obj, proxy)
@@ -500,10 +510,17 @@ def begin_opening(obj):
     if binding_id in _CACHE:
         return None
     opening = _PENDING.get(binding_id)
-    if opening is None or opening.name != obj.name:
+    if opening is None or opening.name != obj.name or opening.cancelled:
         opening = _PENDING[binding_id] = Opening(obj, props, binding_id, triangles)
         opening.start()
     return opening
+
+
+def drop_all():
+    """Forget every binding made in this session and every opening under way (their file is
+    closed: the caller cancels their jobs, :func:`.core.threads.cancel_all`)."""
+    _CACHE.clear()
+    _PENDING.clear()
 
 
 def _early_triangles(obj):
@@ -566,23 +583,29 @@ class Opening:
             triangles = rig_members.read_triangles(obj, parts)
         self._triangles = triangles
         self.fraction, self.stage = 0.0, "reading"
-        self._future = None
+        self._job = None
 
     def start(self):
         """Run :meth:`make` (with the free rebuilds prepared) on the background thread."""
-        self._future = threads.background(self.make, True)
+        self._job = threads.submit(self.make, True, name=f"the opening of {self.name!r}")
 
     def done(self):
-        return self._future is None or self._future.done()
+        return self._job is None or self._job.done()
+
+    @property
+    def cancelled(self):
+        """Its background job was cancelled (:func:`.core.threads.cancel_all`): nothing is made."""
+        return self._job is not None and self._job.cancelled
 
     def made(self):
         """(surface, preview or None): the background's when started (waited for), else made now."""
-        if self._future is None:
+        if self._job is None:
             return self.make()
-        return _wait(self._future, lambda: self.fraction)
+        return _wait(self._job, lambda: self.fraction)
 
     def _report(self, low, high):
         def report(fraction, stage):
+            threads.checkpoint()
             self.fraction, self.stage = low + (high - low) * fraction, stage
         return report
 
@@ -623,6 +646,7 @@ class Opening:
             self.fraction, self.stage = 0.5, "diffusing the skin"
             surface.prepare_layout()
             if preview is not None:
+                threads.checkpoint()
                 self.fraction, self.stage = 0.95, "diffusing the preview's skin"
                 preview.surface.prepare_layout()
         self.fraction, self.stage = 1.0, "done"
@@ -663,11 +687,11 @@ def _unpacked(arrays, source):
     return out
 
 
-def _wait(future, fraction):
-    """The result of ``future``, waited for with the window's progress shown (``fraction()``: 0 to
-    1) when it is not done yet."""
-    if future.done():
-        return future.result()
+def _wait(job, fraction):
+    """The result of ``job`` (a :class:`.core.threads.Job`), waited for with the window's progress
+    shown (``fraction()``: 0 to 1) when it is not done yet."""
+    if job.done():
+        return job.result()
     import bpy
     manager = getattr(bpy.context, "window_manager", None)
     if manager is not None:
@@ -675,7 +699,7 @@ def _wait(future, fraction):
     try:
         while True:
             try:
-                return future.result(timeout=0.1)
+                return job.result(timeout=0.1)
             except concurrent.futures.TimeoutError:
                 if manager is not None:
                     manager.progress_update(int(100 * fraction()))

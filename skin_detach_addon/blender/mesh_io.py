@@ -43,7 +43,8 @@ def read_triangles(mesh, positions=None):
         out = np.empty(counts[2], dtype=np.int32)
         if out.size:
             read_shared(mesh, lambda copy: copy.attributes[".corner_vert"].data.foreach_get("value", out))
-        _FINGERPRINTS.setdefault(mesh.as_pointer(), (counts, _fingerprint_of(counts, out)))
+        if watching():
+            _FINGERPRINTS.setdefault(mesh.as_pointer(), (counts, _fingerprint_of(counts, out)))
         return out.reshape(-1, 3)
     if positions is None:
         return _loop_triangles(mesh)
@@ -108,8 +109,9 @@ def mesh_fingerprint(mesh):
     dependency graph reports its geometry changed (Edit Mode, sculpt, a script's update), an undo
     or redo, or a file load (:func:`_forget_fingerprints`; not for Skin Detach's own writes of
     positions), or its counts change: at 10M vertices
-    each digest read 59M corners (0.2-0.5 s), and every step opens the binding."""
-    _watch_geometry()
+    each digest read 59M corners (0.2-0.5 s), and every step opens the binding. Kept only while
+    the add-on's handlers watch for those changes (:func:`watching`: it is registered); a script
+    that uses the add-on unregistered has every digest read anew."""
     counts = _counts(mesh)
     known = _FINGERPRINTS.get(mesh.as_pointer())
     if known is not None and known[0] == counts:
@@ -118,7 +120,8 @@ def mesh_fingerprint(mesh):
     if corners.size:
         read_shared(mesh, lambda copy: copy.attributes[".corner_vert"].data.foreach_get("value", corners))
     digest = _fingerprint_of(counts, corners)
-    _FINGERPRINTS[mesh.as_pointer()] = (counts, digest)
+    if watching():
+        _FINGERPRINTS[mesh.as_pointer()] = (counts, digest)
     return digest
 
 
@@ -134,25 +137,16 @@ def _fingerprint_of(counts, corners):
     return _digest(counts[0], np.array(counts[1:], dtype=np.int64), corners)
 
 
-def _watch_geometry():
-    """Install the handlers that drop kept fingerprints (once per session)."""
+def watching():
+    """Whether Blender calls :func:`_forget_fingerprints` when a mesh's geometry may have changed
+    (the add-on's register installs it, see :data:`HANDLERS`): only then are fingerprints kept."""
     import bpy
-    handlers = bpy.app.handlers
-    for handler_list in (handlers.depsgraph_update_post, handlers.undo_post, handlers.redo_post,
-                         handlers.load_post):
-        if _forget_fingerprints not in handler_list:
-            handler_list.append(_forget_fingerprints)
+    return _forget_fingerprints in bpy.app.handlers.depsgraph_update_post
 
 
-def stop_watching():
-    """Remove the handlers :func:`_watch_geometry` installed and every kept fingerprint (the
-    add-on's unregister leaves nothing behind)."""
-    import bpy
-    handlers = bpy.app.handlers
-    for handler_list in (handlers.depsgraph_update_post, handlers.undo_post, handlers.redo_post,
-                         handlers.load_post):
-        while _forget_fingerprints in handler_list:
-            handler_list.remove(_forget_fingerprints)
+def forget_all():
+    """Drop every kept fingerprint and the stretch colors' buffer (the add-on's unregister leaves
+    nothing behind)."""
     _FINGERPRINTS.clear()
     _POSITIONS_ONLY.clear()
     _PAINT[0] = None
@@ -181,6 +175,10 @@ def _mesh_type():
 
 
 _forget_fingerprints._bpy_persistent = True  # kept across file loads (bpy.app.handlers.persistent)
+#: (handler list of ``bpy.app.handlers``, function) pairs the add-on's register installs: kept
+#: fingerprints are dropped when Blender may have changed a mesh's geometry.
+HANDLERS = tuple((name, _forget_fingerprints) for name in ("depsgraph_update_post", "undo_post", "redo_post",
+                                                           "load_post"))
 
 
 def read_shared(mesh, read):
@@ -427,7 +425,8 @@ def _refresh(mesh):
     if len(mesh.vertices):
         mesh.vertices[0].co = mesh.vertices[0].co
     mesh.update()
-    _POSITIONS_ONLY[mesh.as_pointer()] = _counts(mesh)
+    if watching():
+        _POSITIONS_ONLY[mesh.as_pointer()] = _counts(mesh)
 
 
 def snapshot(mesh):

@@ -9,6 +9,7 @@ import threading
 import numpy as np
 from mathutils import Matrix
 
+from ..core import threads
 from ..core.detached_surface import SkinDetachedSurface
 from ..core.detached_surface.held_detail import held_proxy_vertices
 from ..core.errors import SkinDetachError
@@ -126,7 +127,7 @@ def build(obj, target_faces=1000, normal_test=True, preview_above=PREVIEW_ABOVE,
     return job.finish()
 
 
-class BuildCancelled(Exception):
+class BuildCancelled(threads.Cancelled):
     """A :class:`BuildJob` was cancelled: nothing was written."""
 
 
@@ -134,10 +135,10 @@ class BuildJob:
     """One build of :func:`build` in three parts, so that a window can go on answering while the
     core works: made on the main thread (reads the mesh: positions (n, 3) float32, triangles
     (t, 3) int32), :meth:`run` on any thread (the core's build; touches no Blender data, reports
-    :attr:`fraction` and :attr:`stage` as it goes; :meth:`start` runs it on a thread of its own),
+    :attr:`fraction` and :attr:`stage` as it goes; :meth:`start` runs it as a job of :func:`..core.threads.submit`),
     :meth:`finish` on the main thread (checks that the mesh is still what was read, then writes
     every object, or raises having written none). :meth:`cancel` stops it at the core's next
-    stage; nothing is written then.
+    stage (opening another file, :func:`..core.threads.cancel_all`, too); nothing is written then.
 
     ``positions``: (n, 3) float32 to bind instead of the mesh's own (the pose the preview shows
     where it stands in for the mesh, see ``api.start_build``); :meth:`finish` writes them into the
@@ -201,7 +202,7 @@ class BuildJob:
         #: What the core's build raised on its thread (given by :meth:`finish`), or None.
         self.error = None
         self._cancel = threading.Event()
-        self._thread = None
+        self._job = None
         self._progress = None
 
     @staticmethod
@@ -215,6 +216,8 @@ class BuildJob:
         """Stop at the core's next stage (:meth:`run` then raises :class:`BuildCancelled`); a
         cancelled job never writes."""
         self._cancel.set()
+        if self._job is not None:
+            self._job.cancel()
 
     @property
     def cancelled(self):
@@ -241,28 +244,29 @@ class BuildJob:
         self._report(1.0, "writing the binding")
 
     def start(self):
-        """:meth:`run` on a thread of its own (see :attr:`done`, :attr:`error`)."""
-        self._thread = threading.Thread(target=self._run_on_thread, name=f"skin_detach build {self.name}",
-                                        daemon=True)
-        self._thread.start()
+        """:meth:`run` on the foreground lane of :func:`..core.threads.submit` (at once, beside an
+        opened file's preparation; its numpy work on the pool), cancelled with :meth:`cancel`
+        (see :attr:`done`, :attr:`error`)."""
+        self._job = threads.submit(self._run_on_thread, lane=threads.FOREGROUND, cancel=self._cancel,
+                                   name=f"the build of {self.name!r}")
 
     def _run_on_thread(self):
         try:
             self.run()
-        except BuildCancelled:
+        except threads.Cancelled:
             pass
         except BaseException as exc:  # noqa: BLE001 (handed to finish(), on the main thread)
             self.error = exc
 
     @property
     def done(self):
-        """The thread of :meth:`start` has ended (built, failed or cancelled)."""
-        return self._thread is not None and not self._thread.is_alive()
+        """The job of :meth:`start` has ended (built, failed or cancelled)."""
+        return self._job is not None and self._job.done()
 
     def wait(self, timeout=None):
-        """Wait for the thread of :meth:`start` (at most ``timeout`` seconds); returns :attr:`done`."""
-        if self._thread is not None:
-            self._thread.join(timeout)
+        """Wait for the job of :meth:`start` (at most ``timeout`` seconds); returns :attr:`done`."""
+        if self._job is not None:
+            self._job.wait(timeout)
         return self.done
 
     def _object(self):

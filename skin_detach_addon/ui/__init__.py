@@ -5,7 +5,7 @@ calls :mod:`skin_detach_addon.api` only (never ``blender`` or ``core`` directly)
 import bpy
 
 from .. import api
-from . import idle_preparation, live_update, menus, operators, panel, properties, saving, stretch_shading
+from . import handlers, idle_preparation, live_update, menus, operators, panel, properties
 
 CLASSES = properties.CLASSES + operators.CLASSES + panel.CLASSES + menus.CLASSES
 
@@ -14,18 +14,14 @@ def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     properties.register()
-    live_update.register()
-    idle_preparation.register()
-    saving.register()
-    stretch_shading.register()
+    handlers.register()
     menus.register()
 
 
 def unregister():
     operators.cancel_builds()
     menus.unregister()
-    stretch_shading.unregister()
-    saving.unregister()
+    handlers.unregister()
     idle_preparation.unregister()
     live_update.unregister()
     properties.unregister()

@@ -4,7 +4,9 @@ carrier, its rebuilds and its handle layout prepared (seconds at millions of ver
 background thread, while the window answers events; a timer polls it on the main thread, which
 alone reads and writes Blender data, and the panel shows "Preparing <mesh>: NN %" once it has
 taken longer than a second. A step the artist asks for meanwhile waits for what is under way. A
-load handler only queues; the timer starts the work after the file is up and drawn.
+load handler only queues; the timer starts the work after the file is up and drawn. Opening
+another file cancels what is under way (:func:`skin_detach_addon.api.before_load`): the new file's
+meshes are prepared at once.
 """
 
 import traceback
@@ -111,15 +113,13 @@ def _on_load(*_args):
         bpy.app.timers.register(prepare_next, first_interval=FIRST_DELAY)
 
 
-def register():
-    if _on_load not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(_on_load)
+#: (handler list of ``bpy.app.handlers``, function) pairs :mod:`.handlers` installs.
+HANDLERS = (("load_post", _on_load),)
 
 
 def unregister():
+    """Stop the timer and forget the queue (:mod:`.handlers` removes the handler)."""
     global _current
-    while _on_load in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(_on_load)
     if bpy.app.timers.is_registered(prepare_next):
         bpy.app.timers.unregister(prepare_next)
     _queue.clear()

@@ -4,7 +4,8 @@ frame change), re-solve without the user pressing anything.
 The depsgraph and frame-change handlers only notice (comparing handle transforms with those of
 the last solve) and schedule a timer; the timer does the write, outside the handler. A guard
 stops the write's own depsgraph update from scheduling another. Only scenes whose
-``skin_detach.live_update`` is on are watched; :func:`unregister` removes handlers and timers.
+``skin_detach.live_update`` is on are watched; :func:`unregister` removes the timers (:mod:`.handlers`
+the handlers).
 
 A mesh above the scene's Preview Above that has a preview shows the preview while its handles
 move; once they have been still for :data:`IDLE_SECONDS`, :func:`settle` writes the full detail.
@@ -159,22 +160,13 @@ def pending():
     return set(_pending)
 
 
-def register():
-    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
-    if _on_frame_change not in bpy.app.handlers.frame_change_post:
-        bpy.app.handlers.frame_change_post.append(_on_frame_change)
-    for handlers in (bpy.app.handlers.save_pre, bpy.app.handlers.load_post):
-        if _settle_all not in handlers:
-            handlers.append(_settle_all)
+#: (handler list of ``bpy.app.handlers``, function) pairs :mod:`.handlers` installs.
+HANDLERS = (("depsgraph_update_post", _on_depsgraph_update), ("frame_change_post", _on_frame_change),
+            ("save_pre", _settle_all), ("load_post", _settle_all))
 
 
 def unregister():
-    for handlers, function in ((bpy.app.handlers.depsgraph_update_post, _on_depsgraph_update),
-                               (bpy.app.handlers.frame_change_post, _on_frame_change),
-                               (bpy.app.handlers.save_pre, _settle_all), (bpy.app.handlers.load_post, _settle_all)):
-        while function in handlers:
-            handlers.remove(function)
+    """Stop the timers and forget what was noticed (:mod:`.handlers` removes the handlers)."""
     for timer in (flush, settle):
         if bpy.app.timers.is_registered(timer):
             bpy.app.timers.unregister(timer)

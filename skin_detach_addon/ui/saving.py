@@ -12,11 +12,5 @@ def _before_save(*_args):
     api.before_save()
 
 
-def register():
-    if _before_save not in bpy.app.handlers.save_pre:
-        bpy.app.handlers.save_pre.append(_before_save)
-
-
-def unregister():
-    while _before_save in bpy.app.handlers.save_pre:
-        bpy.app.handlers.save_pre.remove(_before_save)
+#: (handler list of ``bpy.app.handlers``, function) pairs :mod:`.handlers` installs.
+HANDLERS = (("save_pre", _before_save),)

@@ -69,16 +69,5 @@ def sync(*_):
         settle()
 
 
-_HANDLERS = (bpy.app.handlers.undo_post, bpy.app.handlers.redo_post, bpy.app.handlers.load_post)
-
-
-def register():
-    for handlers in _HANDLERS:
-        if sync not in handlers:
-            handlers.append(sync)
-
-
-def unregister():
-    for handlers in _HANDLERS:
-        while sync in handlers:
-            handlers.remove(sync)
+#: (handler list of ``bpy.app.handlers``, function) pairs :mod:`.handlers` installs.
+HANDLERS = (("undo_post", sync), ("redo_post", sync), ("load_post", sync))

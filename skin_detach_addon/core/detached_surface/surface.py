@@ -4,7 +4,6 @@
     sds.reconstruct(deformed_proxy (m, 3)) -> (n, 3) detail vertices
 """
 
-import concurrent.futures
 import hashlib
 import json
 import threading
@@ -175,10 +174,12 @@ class SkinDetachedSurface:
         self.stats = stats
         #: The detail mesh's triangles (f, 3), once :meth:`attach_topology` gave them (:meth:`build`
         #: and :meth:`load` do), their welded edges where the build has them, the diffused skin
-        #: made from them on first use, and the rebuilds of the last few rigid-group layouts.
+        #: made from them on first use, the free rebuild and the rebuilds of the last few
+        #: rigid-group layouts (read and written under :attr:`_layout_lock` only).
         self.triangles = None
         self._edges = None
         self._seams = None
+        self._free = None
         self._rebuilds = {}
         #: The layout of the last rebuild asked for (its key made once, not once per drag move).
         self._layout = None
@@ -191,7 +192,7 @@ class SkinDetachedSurface:
         #: (a background job may be making it: :meth:`prepare_free_rebuild`).
         self._seams_lock = threading.Lock()
         self._free_lock = threading.Lock()
-        #: Futures of the free rebuild and of layouts' rebuilds given to the background thread.
+        #: Jobs (:func:`..threads.submit`) of the free rebuild and of layouts' rebuilds.
         self._free_job = None
         self._layout_lock = threading.RLock()
         self._layout_jobs = []
@@ -209,10 +210,7 @@ class SkinDetachedSurface:
         if not isinstance(steps, (int, np.integer)) or isinstance(steps, bool) or steps < 0:
             raise SkinDetachError(f"seam_steps: expected an integer >= 0, got {steps!r}")
         self._seam_steps = int(steps)
-        self._seams = None
-        self._rebuilds = {}
-        self._drops.clear()
-        self._reaches.clear()
+        self._forget_rebuilds()
 
     def attach_topology(self, triangles, edges=None):
         """Give the detail mesh's ``triangles`` (f, 3) (indices into the n detail vertices), over
@@ -221,8 +219,15 @@ class SkinDetachedSurface:
         (see :func:`.seam_weights.one_ring`), kept until the diffused skin is made."""
         self.triangles = as_triangles("triangles", triangles, self.n_detail, narrow=True)
         self._edges = edges
-        self._seams = None
-        self._rebuilds = {}
+        self._forget_rebuilds()
+
+    def _forget_rebuilds(self):
+        """Drop the diffused skin, the rebuilds made from it and the drop rows (a new topology or
+        diffusion)."""
+        with self._layout_lock, self._free_lock, self._seams_lock:  # the order they are taken in elsewhere
+            self._seams = None
+            self._free = None
+            self._rebuilds = {}
         self._drops.clear()
         self._reaches.clear()
 
@@ -254,44 +259,47 @@ class SkinDetachedSurface:
         makes it or starts its background job). ``wait=False``: None unless it is made;
         ``float32``: its float32 copy made too."""
         if not wait:
-            return self._rebuilds.get(None)
+            return self._free
         with self._free_lock:
-            if None not in self._rebuilds:
+            if self._free is None:
                 self.free_progress = (0.0, "diffusing the skin")
                 try:
                     skin = self._seam_weights().skin(progress=self._free_progressed)
                     check_coefficients(skin, "the diffused skin")
                     self.free_progress = (0.9, "making the rebuild")
-                    self._rebuilds[None] = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
+                    threads.checkpoint()
+                    self._free = Rebuild(skin, self.weld, self.proxy_vertices, self.proxy_faces)
                     del skin
                 finally:
                     self.free_progress = None
-            rebuild = self._rebuilds[None]
+            rebuild = self._free
         if float32:
             rebuild.float32_blocks()
         return rebuild
 
     def _free_progressed(self, fraction):
+        threads.checkpoint()
         self.free_progress = (0.7 * fraction, "diffusing the skin")
 
     def prepare_free_rebuild(self, background=None, float32=False):
         """Make the free rebuild (see :meth:`_free_rebuild`) now, or with ``background`` (None: for
         meshes of :data:`BACKGROUND_ABOVE` welded vertices or more) on the background thread
-        (:func:`..threads.background`, one core); :attr:`free_progress` says how far it got,
+        (:func:`..threads.submit`, one core); :attr:`free_progress` says how far it got,
         :attr:`free_rebuild_ready` when it is done, and whatever needs it meanwhile waits for it (a
         failure there is raised again by the next call that needs it)."""
         if background is None:
-            background = self.skin.case.shape[0] >= BACKGROUND_ABOVE and None not in self._rebuilds
+            background = self.skin.case.shape[0] >= BACKGROUND_ABOVE and self._free is None
         if not background:  # waits for a running job, if any
             self._free_rebuild(float32=float32)
-        elif None not in self._rebuilds and (self._free_job is None or self._free_job.done()):
+        elif self._free is None and (self._free_job is None or self._free_job.done()):
             self.free_progress = (0.0, "diffusing the skin")
-            self._free_job = threads.background(self._free_rebuild, True, float32)
+            self._free_job = threads.submit(self._free_rebuild, True, float32, watched=False,
+                                            name="the free rebuild")
 
     @property
     def free_rebuild_ready(self):
         """Whether the free rebuild is made (a full-detail rebuild then starts at once)."""
-        return None in self._rebuilds
+        return self._free is not None
 
     def _layout_rebuild(self, groups, held):
         """The :class:`.reconstruction.LayoutRebuild` of a layout: the free rebuild with the rows
@@ -343,9 +351,8 @@ class SkinDetachedSurface:
             self._layout = layout_of(self._layout, groups, held or [])
             key = self._layout.key()
             if key not in self._rebuilds:
-                layouts = [known for known in self._rebuilds if known is not None]
-                if len(layouts) >= 2:
-                    self._rebuilds.pop(layouts[0])
+                if len(self._rebuilds) >= 2:
+                    self._rebuilds.pop(next(iter(self._rebuilds)))
                 self._rebuilds[key] = self._layout_rebuild(groups, held)
             return self._rebuilds[key]
 
@@ -633,7 +640,7 @@ class SkinDetachedSurface:
         that the first :meth:`reconstruct` with it finds its matrix ready (the last two layouts
         prepared or used are kept); ``float32``: also the float32 copy a float32 ``out`` uses
         (:meth:`.reconstruction.Rebuild.float32_blocks`). ``background``: on the background thread
-        (:func:`..threads.background`; a rebuild asking for the layout meanwhile waits for it, and
+        (:func:`..threads.submit`; a rebuild asking for the layout meanwhile waits for it, and
         makes it again, raising, if it failed there)."""
         checked = self._checked_layout(groups, held)
 
@@ -645,13 +652,15 @@ class SkinDetachedSurface:
         if not background:
             prepare()
         else:  # what it raises stays in its Future: made again, and raised, where it is needed
-            self._layout_jobs = [job for job in self._layout_jobs if not job.done()] + [threads.background(prepare)]
+            self._layout_jobs = [job for job in self._layout_jobs if not job.done()] + [
+                threads.submit(prepare, watched=False, name="a layout's rebuild")]
 
     def finish_preparing(self):
         """Wait for what background threads make for this surface (its free rebuild, made now if
         nothing makes it; its layouts' rebuilds)."""
         self.prepare_free_rebuild(background=False, float32=True)
-        concurrent.futures.wait(self._layout_jobs)
+        for job in self._layout_jobs:
+            job.wait()
 
     @property
     def preparing(self):
