@@ -19,7 +19,7 @@ the expected and the actual value; nothing is written when it raises.
 
 import numpy as np
 
-from .blender import (background, baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, rig_members,
+from .blender import (background, baking, binding_cache, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, rig_members,
                       skin_rig)
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
@@ -614,9 +614,10 @@ def selected_vertices(context):
 
 def shutdown():
     """Stop the core's worker threads (unregistering the add-on calls it; they start again when
-    next needed) and the handlers that keep mesh fingerprints."""
+    next needed) and the handlers that keep mesh fingerprints and prune the binding cache."""
     threads.shutdown()
     mesh_io.stop_watching()
+    binding_cache.stop_watching()
 
 
 def frame_list(frames):

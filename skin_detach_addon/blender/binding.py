@@ -247,6 +247,7 @@ def store(obj, surface, rest, proxy, preview=None, members=None, local_rest=None
     (``obj`` first) when it has several, with ``local_rest`` (n, 3) float32 their own rest
     positions concatenated (see :mod:`.rig_members`); ``rest`` is then the combined rest."""
     from . import rig_members
+    _watch_cache()
     rest = np.ascontiguousarray(rest, dtype=np.float32).ravel()
     several = members is not None and len(members) > 1
     entries = rig_members.record_entries(obj, members) if several else None
@@ -386,6 +387,7 @@ def open_binding(obj):
     in this session is made now (or, when the background thread is making it, waited for, the
     window's progress shown); a record of schema 1 is rewritten compact (schema 2) once, said on
     the console. A preparation of the binding running in the background is waited for."""
+    _watch_cache()
     triangles = _early_triangles(obj)
     props, binding_id, proxy = _checked_record(obj)
     binding = _CACHE.get(binding_id)
@@ -409,6 +411,12 @@ def open_binding(obj):
     return binding
 
 
+def _watch_cache():
+    """Keep the cache to the open file's bindings (:mod:`.binding_cache`: its handlers, installed once)."""
+    from . import binding_cache  # it reads this module's tables
+    binding_cache.watch()
+
+
 def _adopt_world_parenting(obj, proxy):
     """The one place handles of files saved by earlier versions (0.1.0, an identity parent inverse
     under the proxy) are migrated to Blender's parenting (:func:`.handles.adopt_world_parenting`):
@@ -426,6 +434,7 @@ def begin_opening(obj):
     """Start making the :class:`Binding` of ``obj`` on the background thread (its record and mesh
     read here, checked as :func:`open_binding` checks them); returns the :class:`Opening`, or None
     when the binding is made already. :func:`open_binding` finishes it on the main thread."""
+    _watch_cache()
     triangles = _early_triangles(obj)
     props, binding_id, _ = _checked_record(obj)
     if binding_id in _CACHE:
