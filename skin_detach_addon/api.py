@@ -19,7 +19,7 @@ the expected and the actual value; nothing is written when it raises.
 
 import numpy as np
 
-from .blender import (background, baking, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, rig_members,
+from .blender import (background, baking, binding_cache, binding_figures, handle_symmetry, handles, mesh_io, preview_stand_in, rig_members,
                       skin_rig)
 from .blender import binding as stored
 from .blender.baking import FILES, OBJECTS, SHAPE_KEYS
@@ -614,9 +614,11 @@ def selected_vertices(context):
 
 def shutdown():
     """Cancel the background work and stop the core's worker threads (unregistering the add-on
-    calls it; they start again when next needed), and drop the kept mesh fingerprints."""
+    calls it; they start again when next needed), and drop the kept mesh fingerprints and every
+    cached binding."""
     threads.shutdown()
     mesh_io.forget_all()
+    stored.drop_all()
 
 
 def before_load(*_args):
@@ -634,8 +636,9 @@ def handlers():
     """(handler list of ``bpy.app.handlers``, function) pairs the add-on installs for this layer
     (its register, in one place with the interface's): :func:`before_load`, and the handlers that
     drop kept mesh fingerprints when Blender may have changed a mesh's geometry (first: the
-    interface's handlers read fingerprints)."""
-    return mesh_io.HANDLERS + (("load_pre", before_load),)
+    interface's handlers read fingerprints), and those that keep the binding cache to the open
+    file's objects (:mod:`.blender.binding_cache`)."""
+    return mesh_io.HANDLERS + binding_cache.HANDLERS + (("load_pre", before_load),)
 
 
 def frame_list(frames):

@@ -885,6 +885,7 @@ def forget(obj):
         side = None if record is None else record.get(STORE)
         if record is not None:
             _CACHE.pop(record.get("binding_id"), None)
+            _PENDING.pop(record.get("binding_id"), None)  # an opening of it under way: what it makes is dropped
         from . import rig_members
         rig_members.untag(obj)
         del obj[KEY]

@@ -50,12 +50,28 @@ class StepReport:
 class Snapshot:
     """What a step may change, saved bit for bit: the mesh (None when the session never writes it
     before it ends; a list, one per object, for a rig of several, see :mod:`.rig_members`) and proxy positions (and shape keys, see :func:`mesh_io.snapshot`), every
-    handle's basis matrix by name, and the written state (see :func:`binding.written_state`)."""
+    handle's transform by name (its location, rotation and scale as stored, :func:`_transform_of`), and
+    the written state (see :func:`binding.written_state`)."""
 
     mesh: tuple
     proxy: tuple
-    matrices: dict
+    transforms: dict
     written: tuple
+
+
+def _transform_of(empty):
+    """The transform channels of ``empty`` as stored (rotation mode, location, the rotation in each
+    mode, scale): set back, they give its basis bit for bit (a basis matrix set back is decomposed
+    again into location, rotation and scale, which rounds them)."""
+    return (empty.rotation_mode, tuple(empty.location), tuple(empty.rotation_euler),
+            tuple(empty.rotation_quaternion), tuple(empty.rotation_axis_angle), tuple(empty.scale))
+
+
+def _set_transform(empty, transform):
+    mode, location, euler, quaternion, axis_angle, scale = transform
+    empty.rotation_mode = mode
+    empty.location, empty.rotation_euler, empty.scale = location, euler, scale
+    empty.rotation_quaternion, empty.rotation_axis_angle = quaternion, axis_angle
 
 
 class Deformation:
@@ -300,14 +316,14 @@ class Deformation:
         until it ends, so its cancel need not write millions of vertices back."""
         kept = (rig_members.snapshot(self.obj) if self.several else mesh_io.snapshot(self.obj.data)) if mesh else None
         return Snapshot(kept, mesh_io.snapshot(self.proxy.data),
-                        {e.name: e.matrix_basis.copy() for e in self.handles()}, stored.written_state(self.obj))
+                        {e.name: _transform_of(e) for e in self.handles()}, stored.written_state(self.obj))
 
     def restore(self, saved):
         """Everything back bit for bit from a :meth:`snapshot`: empties, mesh (and shape keys),
         proxy, written digest; warm starts are dropped."""
         for empty in self.handles():
-            if empty.name in saved.matrices:
-                empty.matrix_basis = saved.matrices[empty.name]
+            if empty.name in saved.transforms:
+                _set_transform(empty, saved.transforms[empty.name])
         if saved.mesh is not None and self.several:
             rig_members.restore(self.obj, saved.mesh)
         elif saved.mesh is not None:
