@@ -250,6 +250,7 @@ class OperationSequences(RuleBasedStateMachine):
         if ok:
             job.start()
             self.job = (kind, job, positions(obj))
+            self.job_file_closed = False  # opening or loading another file cancels it (api.before_load)
 
     @precondition(lambda self: self.job is not None)
     @rule(cancel=st.booleans())
@@ -263,7 +264,7 @@ class OperationSequences(RuleBasedStateMachine):
         try:
             ok, _ = self._call(api.finish_build, job)
         except api.BuildCancelled:  # (documented: a cancelled job writes nothing)
-            assert cancel
+            assert cancel or self.job_file_closed
             ok = False
         if ok:
             obj = self._object(kind)
@@ -427,6 +428,8 @@ class OperationSequences(RuleBasedStateMachine):
     def file(self, action, slot, poll):
         """Save to one of two files; open one this sequence saved (its bound meshes are then queued
         for the background preparation); or load another file (an empty one)."""
+        if action in ("open", "load") and (action == "load" or self.saved):
+            self.job_file_closed = True
         if action == "open" and self.saved:
             rigs, path = self.saved[sorted(self.saved)[slot % len(self.saved)]]
             assert bpy.ops.wm.open_mainfile(filepath=str(path)) == {'FINISHED'}

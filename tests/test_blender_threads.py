@@ -126,3 +126,28 @@ def test_the_stretch_asked_for_by_two_threads_at_once_is_made_once(scene, monkey
     for worker in workers:
         worker.join(10)
     assert len(made) == 1 and len(got) == 2 and got[0] is got[1] is record._skin_stretch()
+
+
+@pytest.mark.parametrize("change", ["clear", "delete", "rebuild"])
+def test_a_mesh_cleared_deleted_or_built_again_during_its_preparation_stops_it_quietly(scene, tmp_path, monkeypatch,
+                                                                                      capsys, change):
+    """Issue 52 item 8: Clear Skin during a preparation had the preparation report "press Build
+    first"; a mesh deleted or edited meanwhile left its half-made binding in memory."""
+    name = _saved(tmp_path / "rig.blend", import_spot)
+    ended = []
+    _slow_opening(monkeypatch, name, ended)
+    opening = _opening_under_way(tmp_path / "rig.blend", name)
+    obj = bpy.data.objects[name]
+    if change == "clear":
+        api.clear(obj)
+    elif change == "delete":
+        bpy.data.objects.remove(obj)
+    else:
+        api.build(obj, target_faces=150)
+    begun = time.perf_counter()
+    assert idle_preparation.prepare_next() is None  # done: nothing left to prepare
+    assert opening._job.wait(1.0) and ended[0] - begun < 1.0, "the opening went on"
+    assert name not in idle_preparation.FAILED and "not prepared" not in capsys.readouterr().out
+    assert opening.binding_id not in binding._PENDING and opening.binding_id not in binding._CACHE
+    if change == "rebuild":
+        assert set(binding._CACHE) == {binding.binding_id(bpy.data.objects[name])}

@@ -31,6 +31,7 @@ class Preparation:
         self.name = obj.name
         self.preserve_volume = preserve_volume
         self.started = time.perf_counter()
+        self.binding_id = stored.binding_id(obj)
         self._opening = stored.begin_opening(obj)  # reads the record and the mesh here
         self._job = None
         self._layout = False
@@ -48,10 +49,15 @@ class Preparation:
 
     def poll(self):
         """Advance one step without waiting: True once done (the binding made and its layout
-        prepared, or the mesh gone), False while work runs in the background. Raises what the
-        preparation raised (:class:`SkinDetachError` for a damaged record or rig)."""
+        prepared, or the mesh gone, cleared or built again meanwhile: nothing of its binding is
+        then kept), False while work runs in the background. Raises what the preparation raised
+        (:class:`SkinDetachError` for a damaged record or rig)."""
         obj = bpy.data.objects.get(self.name)
-        if obj is None:
+        if obj is None or stored.binding_id(obj) != self.binding_id:
+            if self._opening is not None:
+                self._opening.cancel()
+            if self._job is not None:
+                self._job.cancel()
             return True
         if self._opening is not None:
             self.stage = self._opening.stage

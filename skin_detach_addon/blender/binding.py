@@ -592,6 +592,14 @@ class Opening:
     def done(self):
         return self._job is None or self._job.done()
 
+    def cancel(self):
+        """Stop :meth:`make` on the background thread at its next progress report (its mesh was
+        deleted, cleared or built again meanwhile) and forget it."""
+        if self._job is not None:
+            self._job.cancel()
+        if _PENDING.get(self.binding_id) is self:
+            del _PENDING[self.binding_id]
+
     @property
     def cancelled(self):
         """Its background job was cancelled (:func:`.core.threads.cancel_all`): nothing is made."""
