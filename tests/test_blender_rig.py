@@ -67,6 +67,8 @@ def test_binding_is_stored_without_int64_or_pickles(scene):
             assert binding.stored_array(value, key).dtype.kind in "if", key
         elif isinstance(value, bytes):                         # a small narrow integer array, its type beside it
             assert props[key + binding.TYPE_SUFFIX] in ("int8", "int16"), key
+        elif key == binding.DIGESTS:                            # a group of digests (strings)
+            assert all(isinstance(digest, str) for digest in value.values()), key
         else:
             assert isinstance(value, (int, str, float)) or key in ("proxy", "settings", binding.STORE), key
     assert props["schema_version"] == 3 and not set(binding.WHOLE_SKIN_KEYS) & set(props.keys())
