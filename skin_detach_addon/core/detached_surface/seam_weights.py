@@ -366,7 +366,8 @@ class SeamWeights:
         border and around the vertices one group carries (each row the same bit for bit as
         :meth:`layout_associations` gives it). Its cost follows the band, not the selection: only
         the selection's border is walked, only the held vertices within the band's reach get
-        their own rows, and each island of the band is diffused on its own and kept."""
+        their own rows, and each island of the band is diffused on its own and kept; after another
+        layout, only the rows near what changed are diffused again (:meth:`_band_from_last`)."""
         placed = labels >= 0
         carried_free = np.zeros(self._u, dtype=bool)
         candidates = np.flatnonzero(self._on_whole_faces(np.asarray(groups)) & ~placed)
