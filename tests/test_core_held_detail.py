@@ -198,3 +198,46 @@ def test_a_selected_vertex_follows_its_own_group_not_the_one_holding_its_faces(r
     assert np.abs(out[tiny] - _moved(motion, points[tiny])).max() <= 1e-9 * diagonal(points)
     assert np.array_equal(out[anchors], points[anchors])
     assert held.size
+
+
+def test_solvers_sharing_kept_pull_parts_solve_as_solvers_making_their_own_bit_for_bit(rod):
+    """ProxySolves keeps each pull's own parts (PullParts, by the matrix's identity) for the next
+    layouts' solvers: along layouts that add and drop handles (the unchanged selections' drop
+    rows the very same matrices), every solve equals, bit for bit, that of a DualLaplacian that
+    made every part itself; a matrix seen before is not made again."""
+    from skin_detach_addon.core.detached_surface.held_detail import Layout, held_proxy_vertices
+    from skin_detach_addon.core.proxy_solve import pulled_energy
+    from skin_detach_addon.core.proxy_solve.dual_laplacian import DualLaplacian
+    from skin_detach_addon.core.proxy_solve.proxy_solves import ProxySolves, SETTLE_TOL
+    points, _, surface, anchors, _ = rod
+    z = points[:, 2]
+    rings = [np.flatnonzero(np.abs(z - np.quantile(z, q)) < 0.4) for q in (0.3, 0.5, 0.7, 0.9)]
+    solves = ProxySolves(surface)
+    made, asked, fresh = [], 0, 0
+    original = pulled_energy._pull_parts
+    pulled_energy._pull_parts = lambda matrix: made.append(id(matrix)) or original(matrix)
+    try:
+        for chosen in ([0], [0, 2], [0, 1, 2], [1, 2], [1, 2, 3], [0, 3]):
+            held = [(0, anchors)] + [(h + 1, rings[h]) for h in chosen]
+            groups = np.full(surface.proxy_vertices.shape[0], -1, dtype=np.int64)
+            for label, ids in held:
+                groups[held_proxy_vertices(surface, ids)] = label
+            layout = Layout(groups, held)
+            ids = np.flatnonzero(groups >= 0)
+            rest = surface.proxy_vertices
+            targets = rest[ids] + np.where(groups[ids, None] > 0, [0.1, 0.0, 0.05], 0.0)
+            motions = [np.eye(4)] + [np.eye(4) for _ in chosen]
+            for motion in motions[1:]:
+                motion[:3, 3] = [0.1, 0.0, 0.05]
+            before = len(made)
+            got = solves.solve(ids, targets, True, SETTLE_TOL, layout=layout, motions=motions)
+            fresh += len(made) - before
+            pulls = surface.drop_rows([detail for _, detail in layout.owned], groups)
+            asked += len(pulls)
+            alone = DualLaplacian(rest, surface.proxy_faces, ids, preserve_volume=True,
+                                  pulls=[p.copy() for p in pulls])
+            want = alone.solve(targets, max_iter=300, tol=SETTLE_TOL, pull_motions=motions)
+            assert np.array_equal(got.vertices, want.vertices) and got.iterations == want.iterations
+    finally:
+        pulled_energy._pull_parts = original
+    assert 0 < fresh < asked

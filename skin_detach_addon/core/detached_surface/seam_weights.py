@@ -143,6 +143,9 @@ class SeamWeights:
         self._free = None
         #: The associations of the islands of recent layouts (:meth:`layout_associations`).
         self._islands = OrderedDict()
+        #: The last :meth:`layout_band`'s (ids, keep, held rows, placed, associations): the next
+        #: layout's band diffuses only the rows near what changed.
+        self._last_band = None
 
     def _rest_of(self, rows):
         """(r, 3) where the skin as bound rebuilds the welded ``rows`` (r,) at rest: their own
@@ -363,7 +366,8 @@ class SeamWeights:
         border and around the vertices one group carries (each row the same bit for bit as
         :meth:`layout_associations` gives it). Its cost follows the band, not the selection: only
         the selection's border is walked, only the held vertices within the band's reach get
-        their own rows, and each island of the band is diffused on its own and kept."""
+        their own rows, and each island of the band is diffused on its own and kept; after another
+        layout, only the rows near what changed are diffused again (:meth:`_band_from_last`)."""
         placed = labels >= 0
         carried_free = np.zeros(self._u, dtype=bool)
         candidates = np.flatnonzero(self._on_whole_faces(np.asarray(groups)) & ~placed)
@@ -385,7 +389,35 @@ class SeamWeights:
         rows = held_rows(self._frames.points, self._frames.triangles, self._frames.valid, self._rest_of,
                          np.asarray(groups), elsewhere)
         keep |= np.diff(rows.indptr) > 0
-        return ids, self._islands_of(ids, keep, rows)
+        parts = self._band_from_last(ids, keep, rows, placed)
+        self._last_band = (ids, keep, rows, placed, parts)
+        return ids, parts
+
+    def _band_from_last(self, ids, keep, rows, placed):
+        """The associations of the band rows ``ids`` (sorted welded ids) of a layout with the
+        ``keep`` (u,) rows held at ``rows`` (u, k) CSR and ``placed`` (u,) bool, from the last
+        layout's band where they cannot differ. A row after ``steps`` steps reads only the rows
+        within ``steps`` rings, each the same for the same held state and held row: so a row of
+        the last band with no vertex within ``steps`` rings whose held state, held row or
+        placement changed is the last band's row bit for bit, and only the rows within ``steps``
+        rings of a change are diffused again (a new handle's neighbourhood, whatever the number
+        of handles; :meth:`_islands_of`). Without a last band: every row, island by island."""
+        last = self._last_band
+        if last is None:
+            return self._islands_of(ids, keep, rows)
+        last_ids, last_keep, last_rows, last_placed, last_parts = last
+        changed = (keep != last_keep) | (placed != last_placed) | _rows_differ(rows, last_rows)
+        stale = self._within(changed, self.steps)
+        was_band = np.zeros(self._u, dtype=bool)
+        was_band[last_ids] = True
+        # A band row that was not one: a change is within its reach (then it is stale already).
+        redo = ids[stale[ids] | ~was_band[ids]]
+        kept = np.zeros(self._u, dtype=bool)
+        kept[ids] = True
+        kept[redo] = False
+        fresh = self._islands_of(redo, keep, rows) if redo.size else self._no_associations()
+        return tuple(_merged_rows(last_parts, kept[last_parts[0]], fresh, np.ones(fresh[0].size, dtype=bool),
+                                  self._u))
 
     def _islands_of(self, ids, keep, held_rows):
         """The associations of the rows ``ids`` (sorted welded ids) of a layout, island by island
@@ -494,6 +526,21 @@ class SeamWeights:
         inside = chosen[parts[0]]
         vertex, face, weight, bary, height = [a[inside] for a in parts]
         return Skin(vertex=vertex, face=face, bary=bary, height=height, weight=weight, case=self._skin.case)
+
+
+def _rows_differ(first, second):
+    """(u,) bool: the rows of the (u, k) CSR matrices ``first`` and ``second`` that differ in
+    their entries' count, columns or values (bit for bit, in stored order)."""
+    count_first, count_second = np.diff(first.indptr), np.diff(second.indptr)
+    differ = count_first != count_second
+    same = np.flatnonzero(~differ & (count_first > 0))
+    if same.size:
+        positions_first = flat_ranges(first.indptr[same], first.indptr[same + 1])[0]
+        positions_second = flat_ranges(second.indptr[same], second.indptr[same + 1])[0]
+        unequal = (first.indices[positions_first] != second.indices[positions_second]) | \
+            (first.data[positions_first].view(np.int64) != second.data[positions_second].view(np.int64))
+        differ[same] = np.add.reduceat(unequal, np.cumsum(count_first[same]) - count_first[same]) > 0
+    return differ
 
 
 def _merged_rows(first, first_used, second, second_used, u):

@@ -184,7 +184,7 @@ class SkinDetachedSurface:
         #: The layout of the last rebuild asked for (its key made once, not once per drag move).
         self._layout = None
         self._seam_steps = SEAM_STEPS
-        #: Drop rows of recent selections (:meth:`_drop_rows_of`), and their reach (by selection).
+        #: Drop rows of recent selections (:meth:`drop_rows`), and their reach (by selection).
         self._drops = OrderedDict()
         self._reaches = OrderedDict()
         self._corner_weights = None
@@ -367,16 +367,38 @@ class SkinDetachedSurface:
                       for ids in selections]  # a selection a later group took whole pulls nothing
         seams = self._seam_weights()
         keep, _ = seams.held_by(None if groups is None else np.asarray(groups, dtype=np.int64))
-        return [self._drop_rows_of(ids, keep) for ids in selections]
-
-    def _drop_rows_of(self, ids, keep):
-        """(k, m) CSR: :meth:`drop_rows` of one selection of detail ids ``ids`` (k,) with the held
-        vertices ``keep`` (u,) bool, kept per selection and the held vertices within its reach (a
-        new handle makes the drop rows of its own selection, and of those whose neighbourhood its
-        proxy vertices change)."""
         m = self.proxy_vertices.shape[0]
-        if not ids.size:
-            return sp.csr_matrix((0, m))
+        keys = [self._drop_key(ids, keep) if ids.size else None for ids in selections]
+        missing = [i for i, key in enumerate(keys) if key is not None and key[0] not in self._drops]
+        if missing:
+            # The selections a layout changed, diffused at once over their joint reach (a row's
+            # diffusion is the same bit for bit over any sub-mesh that holds its reach): their
+            # reaches overlap where the handles crowd, and each is diffused once, not per selection.
+            welded = np.unique(np.concatenate([keys[i][1] for i in missing]))
+            chosen = np.zeros(keep.shape[0], dtype=bool)
+            chosen[welded] = True
+            region = np.unique(np.concatenate([keys[i][2] for i in missing]))
+            skin = seams.skin_of(welded, keep, (chosen, region))
+            for i in missing:
+                self._drops[keys[i][0]] = sp.csr_matrix(
+                    rebuild_matrix(skin, self.proxy_faces, m, self.weld[selections[i]])[:, :m])
+        out = []
+        for key in keys:
+            if key is None:
+                out.append(sp.csr_matrix((0, m)))
+                continue
+            self._drops.move_to_end(key[0])
+            out.append(self._drops[key[0]])
+        while len(self._drops) > KEPT_DROP_ROWS:
+            self._drops.popitem(last=False)
+        return out
+
+    def _drop_key(self, ids, keep):
+        """(key, welded (s,) sorted ids, reach (r,) sorted ids) of :meth:`drop_rows` of one
+        selection of detail ids ``ids`` (k,) with the held vertices ``keep`` (u,) bool: its drop
+        rows are kept per selection and the held vertices within its reach (a new handle makes
+        the drop rows of its own selection, and of those whose neighbourhood its proxy vertices
+        change)."""
         seams = self._seam_weights()
         digest = hashlib.blake2b(ids.tobytes(), digest_size=20)
         selection = digest.digest()
@@ -388,16 +410,7 @@ class SkinDetachedSurface:
         self._reaches.move_to_end(selection)
         welded, region = self._reaches[selection]
         digest.update(b"|" + region[keep[region]].tobytes())
-        key = digest.digest()
-        if key not in self._drops:
-            chosen = np.zeros(keep.shape[0], dtype=bool)
-            chosen[welded] = True
-            skin = seams.skin_of(welded, keep, (chosen, region))
-            self._drops[key] = sp.csr_matrix(rebuild_matrix(skin, self.proxy_faces, m, self.weld[ids])[:, :m])
-            while len(self._drops) > KEPT_DROP_ROWS:
-                self._drops.popitem(last=False)
-        self._drops.move_to_end(key)
-        return self._drops[key]
+        return digest.digest(), welded, region
 
     @property
     def n_detail(self):

@@ -192,7 +192,7 @@ class DualLaplacian:
     """
 
     def __init__(self, proxy_vertices, proxy_faces, constrained_ids, preserve_volume=True, rigidity=None,
-                 method=DEFAULT_METHOD, pulls=(), pull_strength=STRENGTH):
+                 method=DEFAULT_METHOD, pulls=(), pull_strength=STRENGTH, pull_parts=None):
         if method not in METHODS:
             raise SkinDetachError(f"method: expected one of {', '.join(map(repr, METHODS))}, got {method!r}")
         self.method = method
@@ -249,7 +249,7 @@ class DualLaplacian:
             raise SkinDetachError(f"pulls: expected none with method {method!r} (only 'rotated' pulls), got {len(pulls)}")
         self.n_pulls = len(pulls)
         if method == "rotated":
-            self._setup_rotated(centroid, m, pulls, pull_strength)
+            self._setup_rotated(centroid, m, pulls, pull_strength, pull_parts)
         else:
             self._setup_paper(m)
 
@@ -275,12 +275,13 @@ class DualLaplacian:
         self._factor(normal_eq)
         self._a_free_t = self._a_free.T.tocsr()
 
-    def _setup_rotated(self, centroid, m, pulls, pull_strength):
+    def _setup_rotated(self, centroid, m, pulls, pull_strength, pull_parts=None):
         """The stacked operator B (r, m) of every term of the energy: the k dual Laplacian rows,
         the 3k dual-cell spokes (neighbour centroid or ghost minus own centroid) and, weighted by
         sqrt(rigidity), the 2e cotangent-weighted vertex spokes; each row belongs to one rotation
         group (its face, or the tail vertex of its spoke). With ``pulls`` the energy is
-        :class:`.pulled_energy.PulledEnergy`."""
+        :class:`.pulled_energy.PulledEnergy` (each pull's own parts kept by ``pull_parts``, a
+        :class:`.pulled_energy.PullParts`, if given)."""
         k = self.faces.shape[0]
         cell = self._q - sp.vstack([centroid] * 3)
         blocks, groups = [self.matrix, cell], [np.arange(k), np.tile(np.arange(k), 3)]
@@ -293,7 +294,7 @@ class DualLaplacian:
         b = sp.csr_matrix(sp.vstack(blocks))
         self.energy_terms = RotatedEnergy(b, np.concatenate(groups), n_groups, self.rest)
         if pulls:
-            self.energy_terms = PulledEnergy(self.energy_terms, pulls, self.rest, pull_strength)
+            self.energy_terms = PulledEnergy(self.energy_terms, pulls, self.rest, pull_strength, pull_parts)
         self._factor(self.energy_terms.gram[self.free][:, self.free])
         #: The factored Hessian preconditioning the Newton steps (at rest until a settle refreshes it).
         vertex_groups = k + self.free if self.rigidity else None

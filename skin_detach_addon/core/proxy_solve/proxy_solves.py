@@ -10,6 +10,7 @@ solved before: Apply, bake).
 import numpy as np
 
 from .dual_laplacian import DualLaplacian
+from .pulled_energy import PullParts
 
 #: Tolerance of the proxy solve while the mouse moves (api.DRAG_TOL: a Newton step of at
 #: most 1e-4 of the diagonal, after which the shape is within about 1e-5 of the diagonal of the
@@ -72,6 +73,8 @@ class ProxySolves:
             lambda layout: surface.drop_rows([detail for _, detail in layout.owned], layout.groups))
         #: (ids bytes, preserve_volume, layout key) -> [DualLaplacian, recent results].
         self._solvers = {}
+        #: Each pull's own parts, shared by the layouts' solvers (a new handle's pulls are made).
+        self._pull_parts = PullParts()
 
     def solve(self, ids, targets, preserve_volume, tol, follow=False, budget=None, idle=False, layout=None,
               motions=()):
@@ -102,7 +105,8 @@ class ProxySolves:
                 self._solvers.pop(next(iter(self._solvers)))
             pulls = [] if layout is None else self._pulls_of(layout)
             self._solvers[key] = [DualLaplacian(self.surface.proxy_vertices, self.surface.proxy_faces, ids,
-                                                preserve_volume=preserve_volume, pulls=pulls), []]
+                                                preserve_volume=preserve_volume, pulls=pulls,
+                                                pull_parts=self._pull_parts), []]
         return key
 
     def forget_warm_starts(self):

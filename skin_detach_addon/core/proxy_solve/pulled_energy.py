@@ -23,6 +23,9 @@ rest, invariant under a rigid motion of every handle and anchor together, and sc
 square of a uniform scale, like E.
 """
 
+import threading
+from collections import OrderedDict
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -36,12 +39,54 @@ from ..errors import SkinDetachError
 STRENGTH = 1.0
 
 
+#: Pulls whose gram parts a :class:`PullParts` keeps: a rig of a few dozen handles, its last
+#: layouts' pulls shared.
+KEPT_PULLS = 256
+
+
+class PullParts:
+    """The parts of :class:`PulledEnergy` each pull's matrix M_h (s_h, m) alone gives: G_h =
+    M_h^T M_h (m, m) CSR, its support (the proxy vertices it reaches, (t,) sorted) and G_h over
+    them (t, t), kept for the last :data:`KEPT_PULLS` matrices by identity (each kept with them, so
+    no other matrix takes its id): a layout that adds a handle makes the new pulls' parts, not
+    every handle's again (the drop rows of a selection the change does not reach are the very
+    same matrix, :meth:`..detached_surface.surface.SkinDetachedSurface.drop_rows`)."""
+
+    def __init__(self):
+        self._kept = OrderedDict()
+        self._lock = threading.Lock()
+
+    def of(self, matrix):
+        """(G_h, support, G_h over its support) of ``matrix`` (s_h, m) sparse."""
+        with self._lock:
+            kept = self._kept.get(id(matrix))
+            if kept is not None and kept[0] is matrix:
+                self._kept.move_to_end(id(matrix))
+                return kept[1]
+        parts = _pull_parts(matrix)
+        with self._lock:
+            self._kept[id(matrix)] = (matrix, parts)
+            while len(self._kept) > KEPT_PULLS:
+                self._kept.popitem(last=False)
+        return parts
+
+
+def _pull_parts(matrix):
+    """(G_h (m, m) CSR, support (t,) sorted proxy ids, G_h over the support (t, t) CSR) of one
+    pull's ``matrix`` (s_h, m) sparse."""
+    matrix = sp.csr_matrix(matrix)
+    gram = sp.csr_matrix(matrix.T @ matrix)
+    support = np.unique(gram.indices)
+    return gram, support, gram[support][:, support]
+
+
 class PulledEnergy:
     """E_pull (module docstring) around ``energy`` (a RotatedEnergy over ``rest`` (m, 3)) with the
     pulls ``matrices`` (list of (s_h, m) sparse); the same interface as RotatedEnergy, plus
-    :meth:`set_motions`."""
+    :meth:`set_motions`. ``parts``: a :class:`PullParts` that keeps each matrix's own parts
+    (None: made here)."""
 
-    def __init__(self, energy, matrices, rest, strength=STRENGTH):
+    def __init__(self, energy, matrices, rest, strength=STRENGTH, parts=None):
         m = rest.shape[0]
         for h, matrix in enumerate(matrices):
             if matrix.ndim != 2 or matrix.shape[1] != m:
@@ -50,7 +95,8 @@ class PulledEnergy:
             raise SkinDetachError(f"pull_strength: expected a finite number > 0, got {strength!r}")
         self._energy = energy
         self._rest = rest
-        self._grams = [sp.csr_matrix(matrix.T @ matrix) for matrix in map(sp.csr_matrix, matrices)]
+        made = [parts.of(matrix) if parts is not None else _pull_parts(matrix) for matrix in matrices]
+        self._grams = [gram for gram, _, _ in made]
         gram = sum(self._grams, sp.csr_matrix((m, m)))
         reached = gram.diagonal() > 0
         self.weight = float(strength * energy.gram.diagonal()[reached].mean() / gram.diagonal()[reached].mean()) \
@@ -60,10 +106,10 @@ class PulledEnergy:
         # Every pull over the proxy vertices it reaches only, all pulls in one block-diagonal
         # matrix: the pull is then one product per evaluation, however many handles a rig has
         # (48 small handles summed one by one cost a drag move 2-3 ms).
-        supports = [np.unique(g.indices) for g in self._grams]
+        supports = [support for _, support, _ in made]
         #: (S,) proxy vertex of every row of the stacked supports, (S, S) their weighted grams.
         self._support = np.concatenate(supports) if supports else np.zeros(0, dtype=np.int64)
-        blocks = [self.weight * g[support][:, support] for g, support in zip(self._grams, supports) if support.size]
+        blocks = [self.weight * block for _, support, block in made if support.size]
         self._pull = sp.block_diag(blocks, format="csr") if blocks else sp.csr_matrix((0, 0))
         self._owner = np.repeat(np.arange(len(supports)), [support.size for support in supports])
         self._spread = sp.csr_matrix((np.ones(self._support.size), (self._support, np.arange(self._support.size))),
