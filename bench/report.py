@@ -24,11 +24,16 @@ def metadata(command):
             "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores", "versions": versions}
 
 
-def save(path, rows):
-    """Write ``rows`` (any JSON value) to ``path`` with the :func:`metadata` of this run's command line."""
+def save(path, rows, registered=None):
+    """Write ``rows`` (any JSON value) to ``path`` with the :func:`metadata` of this run's command
+    line, and ``registered`` in it when given: whether the add-on ran registered, as an artist has
+    it (bench/addon.py)."""
     command = "python " + " ".join([os.path.relpath(sys.argv[0])] + sys.argv[1:])
+    meta = metadata(command)
+    if registered is not None:
+        meta["registered"] = bool(registered)
     with open(path, "w", encoding="utf-8") as handle:
-        json.dump({"meta": metadata(command), "rows": rows}, handle, indent=2)
+        json.dump({"meta": meta, "rows": rows}, handle, indent=2)
 
 
 def table(columns, rows):

@@ -64,11 +64,11 @@ import bpy  # noqa: E402  (first: the bpy module makes mathutils importable)
 from mathutils import Matrix  # noqa: E402
 
 from bench import blender_stack, report  # noqa: E402
+from bench.addon import finish, register, registered  # noqa: E402
 from bench.meshes import blender_mesh, named, subdivide, subdivided  # noqa: E402
 from bench.scenario import bend_scenario  # noqa: E402
 from bench.views import AxisView  # noqa: E402
 
-import skin_detach_addon  # noqa: E402
 from skin_detach_addon import api  # noqa: E402
 from skin_detach_addon.blender import mesh_io  # noqa: E402
 from skin_detach_addon.ui import live_update  # noqa: E402
@@ -192,12 +192,6 @@ def our_drag(name, points, triangles, faces, moves, rest_ms, busy=False):
     ratio = path_length(frames, rest) / max(path_length(converged, rest), 1e-300)
     return dict(figures, tracking_median=float(np.median(errors)), tracking_max=float(np.max(errors)),
                 path_ratio=ratio, load=load, registered=registered()), scenario
-
-
-def registered():
-    """Whether the add-on runs as an artist has it: registered, live update's handler installed."""
-    return hasattr(bpy.types.Scene, "skin_detach") and any(
-        getattr(h, "__module__", "").startswith("skin_detach_addon") for h in bpy.app.handlers.depsgraph_update_post)
 
 
 def view_axis(points):
@@ -324,16 +318,11 @@ def main():
     # The add-on as an artist has it: registered, its handlers (live update, saving, idle
     # preparation) installed; every event is followed by what the modal operator and Blender do
     # after it (see :func:`after_event`).
-    skin_detach_addon.register()
+    register()
     rows = measure(args)
     if args.json:
-        report.save(args.json, rows)
-    if bpy.app.version[:2] == (4, 2):
-        # bpy 4.2's module crashes at interpreter exit once the add-on was registered (its
-        # live-update toggle's update callback; tests/conftest.py): end here, the output written.
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(0)
+        report.save(args.json, rows, registered=registered())
+    finish()
 
 
 def measure(args):

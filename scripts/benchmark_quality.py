@@ -63,6 +63,10 @@ handle's off (the largest distance of a vertex it owns, the newest selection con
 where its empty's motion in the object's local space puts it, over the rest diagonal) and each
 anchor's motion (bench/rigs.py held_errors); per rig the worst of them over its confirms, the
 move ms (median, p95) and confirm ms (median, max); goals printed beside the figures (bench/rigs.py GOALS).
+
+With the bpy module (the rigs, the bend as a script makes it) the add-on runs as an artist has it:
+registered (bench/addon.py; its handlers installed), unregistered at the end; the JSON's meta says
+``registered`` (absent without bpy).
 """
 
 import argparse
@@ -490,8 +494,7 @@ def rig_line(row):
 
 
 def run_rigs(args):
-    # The add-on is driven through its API and DragSession, unregistered (bpy 4.2's module crashes
-    # on exit once the add-on was registered, whatever is unregistered before).
+    # The add-on is driven through its API and DragSession, registered as an artist has it (main).
     print("## Rigs artists build (off and anchor motion over the diagonal)\n")
     print("| mesh | vertices | proxy faces | rig | handles + anchors | worst off (goal <= 1e-5) "
           "| worst anchor motion (<= 1e-5) | move ms median (<= 16) / p95 | confirm ms median / max (<= 150) "
@@ -620,10 +623,12 @@ def main():
         if args.json:
             report.save(args.json, {"proxy_angles": rows})
         return
+    registered = as_an_artist_has_it()
     if args.rigs:
         figures = {"rigs": run_rigs(args)}
         if args.json:
-            report.save(args.json, figures)
+            report.save(args.json, figures, registered=registered)
+        finished(registered)
         return
     figures = {"poses": [], "bend": []}
     print(f"## Pose suite ({args.poses} random poses, tol 1e-12, proxy target {args.faces} faces)\n")
@@ -661,7 +666,26 @@ def main():
     for row in figures["totals"]:
         print(f"| {row['method']} | {row['meshes']} | {row['creases']} | {row['dihedral_change_deg']:.3f} |")
     if args.json:
-        report.save(args.json, figures)
+        report.save(args.json, figures, registered=registered)
+    finished(registered)
+
+
+def as_an_artist_has_it():
+    """Register the add-on for the parts that drive it through bpy (the rigs, the bend as a script
+    makes it): whether it runs registered (bench/addon.py), None without the bpy module."""
+    try:
+        import bpy  # noqa: F401
+    except ImportError:
+        return None
+    from bench.addon import register
+    return register()
+
+
+def finished(registered):
+    """Unregister what :func:`as_an_artist_has_it` registered (bench/addon.py's finish: call it last)."""
+    if registered is not None:
+        from bench.addon import finish
+        finish()
 
 
 if __name__ == "__main__":

@@ -26,6 +26,9 @@ diagonal), the build seconds, a drag move's median ms and the confirm's ms. Blen
 body decimated to the same face count carrying Hook + Laplacian Deform, and Surface Deform on the
 body and on each part (as separate objects) bound to it, in the same run: the same figures at the
 bend, its bind and step times.
+
+The add-on runs as an artist has it: registered (bench/addon.py; its handlers installed),
+unregistered at the end; the JSON's meta says ``registered``.
 """
 
 import argparse
@@ -282,6 +285,8 @@ def main():
                         "size (bench.meshes.SIZES; '' for none)")
     parser.add_argument("--json")
     args = parser.parse_args()
+    from bench.addon import finish, register
+    registered = register()  # the add-on as an artist has it (bench/addon.py)
     print("## Riders and several objects\n")
     print(TABLE_HEAD)
     rows = []
@@ -301,7 +306,8 @@ def main():
               f"{row['build_separate_s']:.2f} | {row['build_ratio']:.2f} | {row['move_ms_median']:.1f} / "
               f"{row['move_ms_p95']:.1f} | {row['confirm_ms']:.0f} | {row['separate_vs_joined_diag']:.1e} |", flush=True)
     if args.json:
-        report.save(args.json, figures)
+        report.save(args.json, figures, registered=registered)
+    finish()
 
 
 if __name__ == "__main__":

@@ -36,6 +36,9 @@ def test_quick_benchmark_prints_tables_and_finite_figures(tmp_path):
         assert title in run.stdout
     saved = json.loads((tmp_path / "b.json").read_text())
     assert saved["meta"]["command"].startswith("python ") and "bpy" in saved["meta"]["versions"]
+    # The add-on ran as an artist has it (registered, its handlers installed) in every part.
+    assert saved["meta"]["registered"] is True
+    assert all(row["registered"] is True for rows in saved["rows"].values() for row in rows)
     figures = saved["rows"]
     table1, side = figures["table1"][0], figures["side"][0]
     for key in ("build_s", "blender_steps_per_s", "peak_mb"):
@@ -76,6 +79,7 @@ def test_quality_benchmark_runs_the_pose_suite_and_the_bend_on_small_meshes(tmp_
     saved = json.loads((tmp_path / "q.json").read_text())
     figures = saved["rows"]
     assert saved["meta"]["command"].startswith("python ") and "numpy" in saved["meta"]["versions"]
+    assert saved["meta"]["registered"] is True  # the bend as a script makes it: the add-on registered
     assert [(r["mesh"], r["method"]) for r in figures["poses"]] == [("spot", "rotated"), ("spot", "paper")]
     rotated = figures["poses"][0]
     assert rotated["warm_converged"] == rotated["cold_converged"] == 3
@@ -103,6 +107,7 @@ def test_quality_benchmark_rigs_option_measures_every_rig_on_a_small_mesh(tmp_pa
         assert goal in run.stdout, goal
     saved = json.loads((tmp_path / "r.json").read_text())
     assert saved["meta"]["command"].startswith("python ") and "bpy" in saved["meta"]["versions"]
+    assert saved["meta"]["registered"] is True  # the add-on as an artist has it
     rows = saved["rows"]["rigs"]
     assert [r["rig"] for r in rows] == ["limb: 3 adjacent handles + shoulder anchor",
                                         "hand parented to the forearm's empty", "weighted vertex groups (overlapping)",
@@ -127,7 +132,7 @@ def test_drag_benchmark_busy_option_spins_a_core_beside_each_drag_and_saves_a_bu
     assert run.returncode == 0, run.stderr[-3000:]
     assert "| spot (busy) |" in run.stdout and "## With one core busy" in run.stdout and "40 ms of rest" in run.stdout
     saved = json.loads((tmp_path / "d.json").read_text())
-    assert "--busy" in saved["meta"]["command"]
+    assert "--busy" in saved["meta"]["command"] and saved["meta"]["registered"] is True
     [row] = saved["rows"]
     quiet, busy = row, row["busy"]
     for figures in (quiet, busy):
@@ -191,7 +196,9 @@ def test_riders_benchmark_measures_each_part_beside_blenders_stack(tmp_path):
                          timeout=900)
     assert run.returncode == 0, run.stderr[-2000:]
     assert "## Riders and several objects" in run.stdout
-    rows = json.loads((tmp_path / "r.json").read_text())["rows"]["riders"]
+    saved = json.loads((tmp_path / "r.json").read_text())
+    assert saved["meta"]["registered"] is True  # the add-on as an artist has it
+    rows = saved["rows"]["riders"]
     setups = [row["setup"] for row in rows]
     assert setups[0] == "one mesh" and setups[-1] == "Blender stack"
     ours = rows[0]

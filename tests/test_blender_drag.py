@@ -420,3 +420,30 @@ def test_a_file_loaded_during_a_drag_ends_the_modal_cleanly(scene):
     event.mouse_region_x = 20
     assert SKIN_DETACH_OT_drag.modal(operator, context, event) == {'CANCELLED'}
     assert removed == ["timer"] and headers[-1] is None and reports[-1][0] == {'WARNING'}
+
+
+def test_a_drag_event_solves_with_one_blas_thread_and_gives_the_counts_back(scene, monkeypatch):
+    """Every event's solve runs numpy's and scipy's OpenBLAS on one thread (on a busy machine a
+    small BLAS call waited milliseconds for OpenBLAS's unscheduled worker), their counts set back
+    after the event."""
+    from skin_detach_addon.core import blas_threads
+    from skin_detach_addon.core.proxy_solve import proxy_solves
+    if not blas_threads.controls():
+        pytest.skip("no OpenBLAS found (another BLAS)")
+    obj = import_spot()
+    handle = rig(obj, axis=1)
+    before = blas_threads.counts()
+    seen = []
+    solve = proxy_solves.ProxySolves.solve
+
+    def watched(self, *args, **kwargs):
+        seen.append(blas_threads.counts())
+        return solve(self, *args, **kwargs)
+    monkeypatch.setattr(proxy_solves.ProxySolves, "solve", watched)
+    session = DragSession(obj, handle, TopView(0.01), (100, 100))
+    for kind, value, mouse in [("MOUSEMOVE", "NOTHING", (120, 90)), ("TIMER", "NOTHING", (120, 90)),
+                               ("R", "PRESS", (120, 90)), ("MOUSEMOVE", "NOTHING", (130, 110)),
+                               ("RET", "PRESS", (130, 110))]:
+        session.event(kind, value, mouse)
+        assert blas_threads.counts() == before
+    assert len(seen) >= 4 and all(counts == [1] * len(before) for counts in seen)

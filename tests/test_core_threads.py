@@ -214,3 +214,23 @@ def test_a_surfaces_rebuilds_are_never_changed_while_another_thread_iterates_the
     assert sds.free_rebuild_ready
     bent = sds.proxy_vertices * 1.01
     assert np.allclose(sds.reconstruct(bent, groups=groups), sds.reconstruct(bent, groups=groups))
+
+
+def test_one_blas_thread_inside_the_block_and_the_counts_back_after_it():
+    """numpy's and scipy's OpenBLAS (the wheels here bring both) run on one thread in the block,
+    nested blocks too, and get their own counts back after it, also when it raises."""
+    from skin_detach_addon.core import blas_threads
+    import scipy.sparse.linalg  # noqa: F401 (scipy's BLAS loaded, as the core loads it)
+    if not blas_threads.controls():
+        pytest.skip("no OpenBLAS found (another BLAS)")
+    before = blas_threads.counts()
+    with blas_threads.one_thread():
+        assert blas_threads.counts() == [1] * len(before)
+        with blas_threads.one_thread():
+            assert blas_threads.counts() == [1] * len(before)
+        assert blas_threads.counts() == [1] * len(before)
+    assert blas_threads.counts() == before
+    with pytest.raises(ZeroDivisionError):
+        with blas_threads.one_thread():
+            1 / 0
+    assert blas_threads.counts() == before

@@ -12,7 +12,7 @@ import pytest
 ADDON = pathlib.Path(__file__).resolve().parent.parent / "skin_detach_addon"
 CORE = ADDON / "core"
 #: The core modules both halves build on, at core/'s top level.
-SHARED = {"errors", "validation", "threads", "geometry", "packed_arrays"}
+SHARED = {"errors", "validation", "threads", "blas_threads", "geometry", "packed_arrays"}
 #: The paper's two halves, a subpackage of core each.
 HALVES = ("detached_surface", "proxy_solve")
 #: What each part of core may import: itself and the shared modules.

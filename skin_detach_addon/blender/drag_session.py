@@ -12,6 +12,7 @@ import weakref
 import numpy as np
 from mathutils import Matrix, Vector
 
+from ..core import blas_threads
 from ..core.errors import SkinDetachError
 from ..core.geometry import bbox_diagonal
 from . import binding as stored
@@ -156,7 +157,13 @@ class DragSession:
                 f"X/Y/Z axis, G move, R rotate, S scale, LMB/Enter confirm, RMB/Esc cancel")
 
     def event(self, kind, value, mouse):
-        """Feed one event (Blender's type and value names); returns RUNNING_MODAL, FINISHED or CANCELLED."""
+        """Feed one event (Blender's type and value names); returns RUNNING_MODAL, FINISHED or CANCELLED.
+        Its BLAS calls run on one thread (:func:`..core.blas_threads.one_thread`: on a busy machine
+        the small ones waited for OpenBLAS's unscheduled worker thread)."""
+        with blas_threads.one_thread():
+            return self._event(kind, value, mouse)
+
+    def _event(self, kind, value, mouse):
         if kind == "TIMER":
             self.settle_slice()
             return RUNNING
