@@ -101,11 +101,15 @@ def files(rows, title="The bound file"):
     if not rows:
         return ""
     faces = [("faces", lambda r: r["faces"])] if all("faces" in r for r in rows) else []
+    # The files part's rows: the preview's size too (stored with the binding, rebuilt each drag
+    # move; the large part's table has it already); rows measured before it was recorded: none.
+    previews = ([("preview vertices", lambda r: f"{r['preview_vertices']:,}")]
+                if faces and all("preview_vertices" in r for r in rows) else [])
     return (f"\n### {title}\n\nThe rigged mesh of each row saved and opened (bpy's open_mainfile) with its binding, "
             "then without it (plain: the rig and the record removed); after opening, the seconds until it is "
             "prepared (the skin bound again and the layout prepared on the background thread, polled every 50 ms) "
             "and the longest the main thread was held meanwhile.\n\n" + table(faces + [
-                ("vertices", lambda r: f"{r['vertices']:,}"),
+                ("vertices", lambda r: f"{r['vertices']:,}")] + previews + [
                 ("save s", lambda r: f"{r['files']['save_s']:.2f}"),
                 (".blend MB (x plain)", lambda r: f"{r['files']['blend_mb']:.0f} ({r['files']['size_x']:.2f})"),
                 ("plain MB", lambda r: f"{r['files']['plain_mb']:.0f}"),

@@ -352,7 +352,7 @@ def files_row(spec, steps):
         obj = blender_mesh("armadillo", *subdivided("armadillo", SIZES[spec]))
     obj.rotation_euler, obj.scale = (np.pi / 2, 0.0, 0.0), (0.5, 0.5, 0.5)  # as an OBJ import leaves it
     bpy.context.view_layer.update()
-    api.build(obj, target_faces=1000)
+    stats = api.build(obj, target_faces=1000)
     points = mesh_io.read_positions(obj.data)
     scenario = bend_scenario(points.astype(np.float64))
     api.add_anchor(obj, scenario.anchor_ids)
@@ -362,7 +362,7 @@ def files_row(spec, steps):
     sizes = np.empty(len(obj.data.polygons), dtype=np.int32)
     obj.data.polygons.foreach_get("loop_total", sizes)
     return {"size": spec, "faces": "quads" if (sizes == 4).all() else "triangles", "vertices": int(points.shape[0]),
-            "files": file_figures(obj)}
+            "preview_vertices": int(stats.get("preview_vertices", 0)), "files": file_figures(obj)}
 
 
 def run_one(spec, steps):

@@ -126,3 +126,33 @@ def ribbon(length_cells, width=1e-4, rows=3):
     index = np.arange(points.shape[0]).reshape(length_cells + 1, rows)
     a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
     return points, np.concatenate([np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)])
+
+
+def simple_subdivided(points, triangles, levels):
+    """The triangles as Blender's Simple subdivision of ``levels`` (>= 1) leaves them, read back
+    as triangles: each triangle into three quads (through its edge midpoints and centre), each
+    quad into four at every further level, all flat; then each quad (a, b, c, d) split along its
+    diagonal a-c. Returns (points (n', 3), triangles (f', 3)), f' = 6 * 4**(levels - 1) * f."""
+    polygons = triangles
+    for _ in range(levels):
+        n, sides = points.shape[0], polygons.shape[1]
+        edges = np.sort(np.stack([polygons, np.roll(polygons, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mid = n + inverse.ravel().reshape(-1, sides)  # mid[:, i]: the midpoint of side (i, i + 1)
+        centre = n + unique.shape[0] + np.arange(polygons.shape[0])
+        points = np.concatenate([points, points[unique].mean(axis=1), points[polygons].mean(axis=1)])
+        # Corner i keeps the quad (corner, midpoint after it, centre, midpoint before it).
+        polygons = np.concatenate([np.stack([polygons[:, i], mid[:, i], centre, mid[:, i - 1]], axis=1)
+                                   for i in range(sides)])
+    return points, np.concatenate([polygons[:, [0, 1, 2]], polygons[:, [0, 2, 3]]])
+
+
+def bumpy_ball(cells=6, bumps=0.3, frequency=12.0, seed=0):
+    """A closed ball of :func:`box` triangles pushed onto a sphere of radius 1 with waves of
+    relative height ``bumps`` (about ``frequency`` / pi of them around)."""
+    points, tris = box(cells=(cells, cells, cells))
+    points = points - 0.5
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    k = np.random.default_rng(seed).normal(size=(2, 3)) * frequency
+    radius = 1.0 + bumps * np.sin(points @ k[0]) * np.cos(points @ k[1])
+    return points * radius[:, None], tris
