@@ -681,23 +681,16 @@ def test_a_large_meshs_free_rebuild_made_in_the_background_rebuilds_the_same(bun
     assert np.array_equal(background.reconstruct(bent, out=out.copy()), made.reconstruct(bent, out=out))
 
 
-def test_a_layouts_band_made_from_the_last_equals_the_band_made_from_scratch_bit_for_bit(bundled):
-    """layout_band after another layout's diffuses only the rows near what changed (a handle
-    added, removed, an anchor's selection grown) and keeps the last band's other rows: along a
-    random sequence of small handles added and removed, every band equals, bit for bit, the one a
-    fresh SeamWeights (no last band, no kept islands) makes of the same layout."""
+def random_layouts(sds, points, seed, steps, drop_chance):
+    """Yield (held pairs, proxy groups (m,)) of a random sequence of ``steps`` layouts of ``sds``:
+    the feet anchored, small round handles added or (with ``drop_chance``, or past five) removed."""
     from skin_detach_addon.core.detached_surface.held_detail import held_proxy_vertices
-    from skin_detach_addon.core.detached_surface.seam_weights import SeamWeights
-    points, tris = bundled("armadillo")
-    sds = SkinDetachedSurface.build(points, tris, target_faces=600)
-    seams = sds._seam_weights()
-    rng = np.random.default_rng(53)
+    rng = np.random.default_rng(seed)
     radius = 0.06 * diagonal(points)
     anchor = np.flatnonzero(points[:, 1] < points[:, 1].min() + 0.1 * np.ptp(points[:, 1]))
     handles = []
-    reused = 0
-    for step in range(14):
-        if handles and (rng.random() < 0.35 or len(handles) > 5):
+    for _ in range(steps):
+        if handles and (rng.random() < drop_chance or len(handles) > 5):
             handles.pop(int(rng.integers(len(handles))))
         else:
             centre = points[rng.integers(points.shape[0])]
@@ -706,6 +699,20 @@ def test_a_layouts_band_made_from_the_last_equals_the_band_made_from_scratch_bit
         groups = np.full(sds.proxy_vertices.shape[0], -1, dtype=np.int64)
         for label, ids in held:
             groups[held_proxy_vertices(sds, ids)] = label
+        yield held, groups
+
+
+def test_a_layouts_band_made_from_the_last_equals_the_band_made_from_scratch_bit_for_bit(bundled):
+    """layout_band after another layout's diffuses only the rows near what changed (a handle
+    added, removed, an anchor's selection grown) and keeps the last band's other rows: along a
+    random sequence of small handles added and removed, every band equals, bit for bit, the one a
+    fresh SeamWeights (no last band, no kept islands) makes of the same layout."""
+    from skin_detach_addon.core.detached_surface.seam_weights import SeamWeights
+    points, tris = bundled("armadillo")
+    sds = SkinDetachedSurface.build(points, tris, target_faces=600)
+    seams = sds._seam_weights()
+    reused = 0
+    for held, groups in random_layouts(sds, points, 53, 14, 0.35):
         labels = sds._held_labels(held)
         last = seams._last_band
         rows, parts = seams.layout_band(groups, labels)
@@ -725,24 +732,10 @@ def test_drop_rows_made_together_after_other_layouts_equal_each_selections_made_
     keeps the others': along a random sequence of small handles added and removed, every
     selection's drop rows equal, bit for bit, those a surface with nothing kept makes of that
     selection alone (which equal the whole layout's rows, see above)."""
-    from skin_detach_addon.core.detached_surface.held_detail import held_proxy_vertices
     points, tris = bundled("armadillo")
     sds = SkinDetachedSurface.build(points, tris, target_faces=600)
-    rng = np.random.default_rng(530)
-    radius = 0.06 * diagonal(points)
-    anchor = np.flatnonzero(points[:, 1] < points[:, 1].min() + 0.1 * np.ptp(points[:, 1]))
-    handles = []
     together = 0
-    for step in range(10):
-        if handles and (rng.random() < 0.3 or len(handles) > 5):
-            handles.pop(int(rng.integers(len(handles))))
-        else:
-            centre = points[rng.integers(points.shape[0])]
-            handles.append(np.flatnonzero(np.linalg.norm(points - centre, axis=1) < radius * rng.uniform(0.3, 1.0)))
-        held = [(0, anchor)] + [(h + 1, ids) for h, ids in enumerate(handles)]
-        groups = np.full(sds.proxy_vertices.shape[0], -1, dtype=np.int64)
-        for label, ids in held:
-            groups[held_proxy_vertices(sds, ids)] = label
+    for held, groups in random_layouts(sds, points, 530, 10, 0.3):
         kept_before = len(sds._drops)
         got = sds.drop_rows([ids for _, ids in held], groups)
         together = max(together, len(sds._drops) - kept_before)
