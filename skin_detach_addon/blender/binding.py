@@ -565,7 +565,7 @@ class Opening:
             raise SkinDetachError(f"binding of {obj.name!r}: expected its arrays in the text datablock its record "
                                   f"points at, it was deleted or damaged; press Rebuild")
         self._arrays = {key: _copied(source, key) for source in (props, stored_arrays) for key in source.keys()
-                        if key not in ("proxy", "preview", STORE, DIGESTS)}
+                        if key not in ("proxy", "preview", STORE, DIGESTS, "rest")}  # the rest: read below, once
         digests = props.get(DIGESTS)
         self._digests = None if digests is None else _read_digests(obj, digests)
         from . import rig_members
@@ -634,7 +634,7 @@ class Opening:
                                       f"{surface.n_detail}; press Rebuild")
             surface.attach_topology(self._triangles)  # the topology was checked
         else:
-            main = _unpacked({key: value for key, value in main.items() if key != "rest"}, source)  # unpacked already
+            main = _unpacked(main, source)
             surface = surface_from_compact(main, self.rest, self._triangles, source,
                                            self._report(0.0, 0.5 if prepare else 1.0))
         self._triangles = None

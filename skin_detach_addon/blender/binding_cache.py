@@ -2,12 +2,13 @@
 
 :data:`.binding._CACHE` keeps the core side of each binding opened in this session (at millions of
 vertices, hundreds of MB), :data:`.binding._PENDING` the openings under way on the background
-thread, both by binding id. A Rebuild or Clear drops its own entry (:func:`.binding.forget`); what
-else leaves an id held by no object, a file loaded, a mesh deleted, an undo or redo back to before
-its build, is dropped here (:func:`prune`), from handlers: after every file load, undo and redo,
-and after a dependency graph update that finds fewer objects than the last (a delete; the count is
-cheap, the scan of every object's record is done only then), installed by the add-on's register. An undo that brings a deleted mesh
-back makes its binding again from the record, as a reopened file does.
+thread, both by binding id. A Rebuild or Clear drops its own entry (:func:`.binding.forget`), a
+file about to be opened drops them all (:func:`skin_detach_addon.api.before_load`); what else
+leaves an id held by no object, a mesh deleted, an undo or redo back to before its build, is
+dropped here (:func:`prune`), from handlers the add-on's register installs: after every undo and
+redo, and after a dependency graph update that finds fewer objects than the last (a delete; the
+count is cheap, the scan of every object's record is done only then). An undo that brings a
+deleted mesh back makes its binding again from the record, as a reopened file does.
 """
 
 from . import binding as stored
@@ -53,4 +54,4 @@ _after_update._bpy_persistent = True
 
 #: (handler list name of ``bpy.app.handlers``, function) pairs the add-on's register installs
 #: (:func:`skin_detach_addon.api.handlers`, in one place with the others).
-HANDLERS = (("load_post", prune), ("undo_post", prune), ("redo_post", prune), ("depsgraph_update_post", _after_update))
+HANDLERS = (("undo_post", prune), ("redo_post", prune), ("depsgraph_update_post", _after_update))
