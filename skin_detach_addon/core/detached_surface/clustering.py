@@ -40,7 +40,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
-from ..geometry import column_max, column_min, face_cross, first_of_each_triple, rows_any, vertex_normals
+from ..geometry import (column_max, column_min, face_cross, first_of_each_triple, rows_any, segment_ranges,
+                        vertex_normals)
 from .. import threads
 from ..threads import map_blocks
 
@@ -180,31 +181,20 @@ def _subdivide(points, graph, normals, label, rep, summed, level, split, size):
     # The graph restricted to edges inside one split cluster, weighted by length.
     local = np.full(graph.shape[0], -1, dtype=np.int64)
     local[members] = np.arange(members.size)
-    starts, stops = graph.indptr[members], graph.indptr[members + 1]
-    counts = stops - starts
-    rows = np.repeat(np.arange(members.size), counts)
-    heads = graph.indices[np.repeat(stops - np.cumsum(counts), counts) + np.arange(counts.sum())]
+    positions, rows = segment_ranges(graph.indptr, members)
+    heads = graph.indices[positions]
     inside = (local[heads] >= 0) & (label[heads] == parent[rows])
     rows, heads = rows[inside], local[heads[inside]]
-    gap = points[members[rows]] - points[members[heads]]
-    lengths = np.maximum(np.sqrt(np.einsum("ij,ij->i", gap, gap)), 1e-300)
-    sub = sp.csr_matrix((lengths, (rows, heads)), shape=(members.size, members.size))
-    sources = dijkstra(sub, directed=True, indices=seeds, min_only=True, return_predecessors=True)[2]
-    rank = np.full(members.size, -1, dtype=np.int64)
-    rank[seeds] = np.arange(seeds.size)
-    child = np.where(sources >= 0, rank[np.maximum(sources, 0)], -1)
-    lost = np.flatnonzero(child < 0)
-    child[lost] = seeds.size + np.arange(lost.size)
-    new_rep = members[np.concatenate([seeds, lost])]
+    sub = sp.csr_matrix((np.ones(rows.size), (rows, heads)), shape=(members.size, members.size))
+    child, local_rep = _voronoi_labels(points[members], sub, seeds)
+    new_rep = members[local_rep]
     keep = ~split
     n_keep = int(keep.sum())
     new_id = np.cumsum(keep) - 1
     label = new_id[label]
     label[members] = n_keep + child
-    n_new = new_rep.size
-    child_summed = np.stack([np.bincount(child, weights=normals[members, axis], minlength=n_new)
-                             for axis in range(3)], axis=1)
-    child_level = np.concatenate([level[parent[seeds]] + 1, level[parent[lost]] + 1])
+    child_summed = _summed_normals(child, normals[members], new_rep.size)
+    child_level = level[parent[local_rep]] + 1
     return (label, np.concatenate([rep[keep], new_rep]), np.concatenate([summed[keep], child_summed]),
             np.concatenate([level[keep], child_level]))
 
